@@ -1,0 +1,84 @@
+"""Traveling-wave gaits (MODEL.md §6): the serpenoid for swimming, the length wave for inching.
+
+All functions are plain numpy on arrays, so policies and tests share them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["serpenoid_phase", "serpenoid", "length_wave", "max_serpenoid_amplitude"]
+
+
+def serpenoid_phase(t: float, n_interior: int, omega: float, delta: float, psi0: float = 0.0) -> np.ndarray:
+    """Centralized clock ``psi_j = omega t + delta j + psi0`` for interior nodes j = 1..N-2."""
+    return omega * t + delta * np.arange(1, n_interior + 1) + psi0
+
+
+def serpenoid(psi: np.ndarray, psi_dot: float | np.ndarray, alpha: float, gamma: float = 0.0
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Desired curvature and its rate at phases ``psi`` (MODEL.md §6).
+
+    ``phi_des = alpha sin(psi) + gamma``, ``kappa_des = 2 tan(phi_des / 2)``,
+    ``kappa_dot_des = alpha psi_dot cos(psi) sec^2(phi_des / 2)``.
+
+    Returns:
+        (kappa_des, kappa_dot_des), each shaped like ``psi`` [-, 1/s].
+    """
+    phi = alpha * np.sin(psi) + gamma
+    half = 0.5 * phi
+    return 2.0 * np.tan(half), alpha * psi_dot * np.cos(psi) / np.cos(half) ** 2
+
+
+def max_serpenoid_amplitude(n_nodes: int, delta: float, gamma: float = 0.0) -> float:
+    """Largest ``alpha`` (bisection, 1e-4 rad) whose serpenoid body with equal edges does not
+    self-intersect at any phase (MODEL.md §6)."""
+    from soft_snake_gym.physics.simulator import body_from_curvature
+
+    lbar = np.ones(n_nodes - 1)
+
+    def crosses(alpha: float) -> bool:
+        for psi0 in np.linspace(0.0, 2 * np.pi, 24, endpoint=False):
+            k, _ = serpenoid(serpenoid_phase(0.0, n_nodes - 2, 0.0, delta, psi0), 0.0, alpha, gamma)
+            if _polyline_crosses(body_from_curvature(k, lbar)):
+                return True
+        return False
+
+    lo, hi = 0.0, np.pi * 0.999
+    if not crosses(hi):
+        return hi
+    while hi - lo > 1e-4:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if crosses(mid) else (mid, hi)
+    return lo
+
+
+def _polyline_crosses(x: np.ndarray) -> bool:
+    p, d = x[:-1], np.diff(x, axis=0)
+    for a in range(len(d)):
+        for b in range(a + 2, len(d)):
+            def orient(o, r, s):
+                return (r[0] - o[0]) * (s[1] - o[1]) - (r[1] - o[1]) * (s[0] - o[0])
+            d1 = orient(p[a], p[a] + d[a], p[b])
+            d2 = orient(p[a], p[a] + d[a], p[b] + d[b])
+            d3 = orient(p[b], p[b] + d[b], p[a])
+            d4 = orient(p[b], p[b] + d[b], p[a] + d[a])
+            if d1 * d2 < 0 and d3 * d4 < 0:
+                return True
+    return False
+
+
+def length_wave(t: float, n_edges: int, l0: float, eps: float, omega: float, delta_l: float,
+                direction: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Compression wave of the rest lengths (MODEL.md §6).
+
+    ``lbar_des,k = l0 (1 - eps (1 + sin(omega t - direction delta_l k)) / 2)``; with
+    ``direction = +1`` the wave travels from tail to head, with -1 from head to tail.
+
+    Returns:
+        (lbar_des, lbar_dot_des), (n_edges,) each [m, m/s].
+    """
+    if direction not in (1, -1):
+        raise ValueError(f"direction = {direction!r} must be +1 (tail to head) or -1 (head to tail)")
+    arg = omega * t - direction * delta_l * np.arange(n_edges)
+    return l0 * (1.0 - 0.5 * eps * (1.0 + np.sin(arg))), -0.5 * l0 * eps * omega * np.cos(arg)

@@ -1,0 +1,226 @@
+"""Physical and numerical parameters, as frozen and validated dataclasses (MODEL.md §9).
+
+Every field is in SI units and named as in MODEL.md. Impossible values raise ``ValueError``
+naming the field, the value and the allowed range, so a typo in a YAML file or a sweep grid
+fails at construction time instead of as a NaN a thousand steps later.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Literal
+
+__all__ = ["Rod", "Fluid", "Ground", "Integrator", "SimConfig", "Medium"]
+
+Medium = Literal["water", "ground", "none"]
+
+
+def _check(owner: object, name: str, lo: float | None = None, hi: float | None = None,
+           lo_open: bool = False, hi_open: bool = False) -> None:
+    """Raise ``ValueError`` unless ``owner.name`` is a finite number within [lo, hi]."""
+    value = getattr(owner, name)
+    cls = type(owner).__name__
+    left = "(" if lo_open else "["
+    right = ")" if hi_open else "]"
+    allowed = f"{left}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{right}"
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{cls}.{name} = {value!r} must be a number in {allowed}")
+    bad = not math.isfinite(value)
+    if lo is not None:
+        bad |= value <= lo if lo_open else value < lo
+    if hi is not None:
+        bad |= value >= hi if hi_open else value > hi
+    if bad:
+        raise ValueError(f"{cls}.{name} = {value!r} is outside the allowed range {allowed}")
+
+
+def _check_int(owner: object, name: str, lo: int, hi: int | None = None) -> None:
+    value = getattr(owner, name)
+    cls = type(owner).__name__
+    allowed = f"[{lo}, {'inf' if hi is None else hi}]"
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (
+        hi is not None and value > hi
+    ):
+        raise ValueError(f"{cls}.{name} = {value!r} must be an integer in {allowed}")
+
+
+@dataclass(frozen=True)
+class Rod:
+    """The soft body: N nodes, N-1 edges of elliptic cross-section (MODEL.md §3, §9).
+
+    Attributes:
+        N: number of nodes (>= 3); the head is node N-1.
+        edge_length: rest length of every edge at rest, ``lbar`` at t = 0 [m].
+        edge_mass: mass of every edge [kg]; node masses are lumped from it.
+        a: half-height of the cross-section, out of the plane [m].
+        b: half-width of the cross-section, in the plane [m].
+        E: Young's modulus [Pa], used for both stiffnesses unless overridden.
+        E_stretch: stretching modulus [Pa] overriding ``E`` in ``EA`` (None: use ``E``).
+        E_bend: bending modulus [Pa] overriding ``E`` in ``EI`` (None: use ``E``).
+        damping: viscous damping ``d`` on curvature rates [N m s] and stretch rates [N s/m].
+    """
+
+    N: int = 10
+    edge_length: float = 0.18
+    edge_mass: float = 0.8
+    a: float = 0.055
+    b: float = 0.05
+    E: float = 1.875e6
+    E_stretch: float | None = None
+    E_bend: float | None = None
+    damping: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check_int(self, "N", 3, 100_000)
+        _check(self, "edge_length", 0.0, None, lo_open=True)
+        _check(self, "edge_mass", 0.0, None, lo_open=True)
+        _check(self, "a", 0.0, None, lo_open=True)
+        _check(self, "b", 0.0, None, lo_open=True)
+        _check(self, "E", 0.0, None, lo_open=True)
+        if self.E_stretch is not None:
+            _check(self, "E_stretch", 0.0, None, lo_open=True)
+        if self.E_bend is not None:
+            _check(self, "E_bend", 0.0, None, lo_open=True)
+        _check(self, "damping", 0.0, None)
+
+    @property
+    def area(self) -> float:
+        """Cross-section area ``A = pi a b`` [m^2]."""
+        return math.pi * self.a * self.b
+
+    @property
+    def second_moment(self) -> float:
+        """In-plane second moment of area ``I = pi a b^3 / 4`` [m^4]."""
+        return math.pi * self.a * self.b**3 / 4.0
+
+    @property
+    def EA(self) -> float:  # noqa: N802 - MODEL.md's name
+        """Stretching stiffness [N]."""
+        return (self.E if self.E_stretch is None else self.E_stretch) * self.area
+
+    @property
+    def EI(self) -> float:  # noqa: N802 - MODEL.md's name
+        """Bending stiffness [N m^2]."""
+        return (self.E if self.E_bend is None else self.E_bend) * self.second_moment
+
+    @property
+    def length(self) -> float:
+        """Rest length of the whole body [m]."""
+        return (self.N - 1) * self.edge_length
+
+    @property
+    def total_mass(self) -> float:
+        """Mass of the whole body [kg]."""
+        return (self.N - 1) * self.edge_mass
+
+
+@dataclass(frozen=True)
+class Fluid:
+    """Water at rest, Morison-type drag and normal added mass (MODEL.md §4)."""
+
+    rho: float = 1000.0
+    C_f: float = 0.3
+    C_D: float = 1.75
+    C_A: float = 1.5
+
+    def __post_init__(self) -> None:
+        _check(self, "rho", 0.0, None)
+        _check(self, "C_f", 0.0, None)
+        _check(self, "C_D", 0.0, None)
+        _check(self, "C_A", 0.0, None)
+
+
+@dataclass(frozen=True)
+class Ground:
+    """Stick-slip (Karnopp) Coulomb friction on a flat floor (MODEL.md §5)."""
+
+    mu_s: float = 1.15
+    mu_d: float = 0.8
+    V_tol: float = 1e-3
+    g: float = 9.81
+
+    def __post_init__(self) -> None:
+        _check(self, "mu_s", 0.0, None)
+        _check(self, "mu_d", 0.0, None)
+        _check(self, "V_tol", 0.0, None, lo_open=True)
+        _check(self, "g", 0.0, None)
+        if self.mu_d > self.mu_s:
+            raise ValueError(
+                f"Ground.mu_d = {self.mu_d!r} exceeds Ground.mu_s = {self.mu_s!r}: kinetic "
+                "friction must not exceed static friction (allowed: 0 <= mu_d <= mu_s)"
+            )
+
+
+@dataclass(frozen=True)
+class Integrator:
+    """Time integration (MODEL.md §5a).
+
+    Attributes:
+        method: ``"backward_euler"`` (default; Newton on the banded analytic Jacobian) or
+            ``"symplectic_euler"`` (explicit, sub-stepped; needs ``Rod.damping > 0`` under
+            the curvature PID, see MODEL.md §5a).
+        h: step [s]; the inputs are held constant over it.
+        substeps: internal steps per ``h``; ``None`` picks 1 for backward Euler and, for the
+            explicit method, enough that each sub-step is at most 0.5 / omega_max, with
+            omega_max the rod's highest stretching frequency.
+        newton_tol: residual tolerance of a Newton step [N s], max-norm.
+        newton_max_iter: iteration cap; a step that does not converge is reported as a failure.
+        max_strain: a step with ``| |e|/lbar - 1 |`` above this is reported as runaway stretch.
+        check_self_intersection: test the body for crossing edges after every step.
+    """
+
+    method: Literal["backward_euler", "symplectic_euler"] = "backward_euler"
+    h: float = 0.01
+    substeps: int | None = None
+    newton_tol: float = 1e-8
+    newton_max_iter: int = 30
+    max_strain: float = 0.5
+    check_self_intersection: bool = True
+
+    def __post_init__(self) -> None:
+        if self.method not in ("backward_euler", "symplectic_euler"):
+            raise ValueError(
+                f"Integrator.method = {self.method!r} is unknown; "
+                "use 'backward_euler' or 'symplectic_euler'"
+            )
+        _check(self, "h", 0.0, 1.0, lo_open=True)
+        if self.substeps is not None:
+            _check_int(self, "substeps", 1, 1_000_000)
+        _check(self, "newton_tol", 0.0, None, lo_open=True)
+        _check_int(self, "newton_max_iter", 1, 10_000)
+        _check(self, "max_strain", 0.0, None, lo_open=True)
+        if not isinstance(self.check_self_intersection, bool):
+            raise ValueError(
+                "Integrator.check_self_intersection = "
+                f"{self.check_self_intersection!r} must be true or false"
+            )
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Everything a :class:`~soft_snake_gym.physics.Simulator` needs.
+
+    ``medium`` selects which of ``fluid`` and ``ground`` acts; the other is kept so that one
+    YAML file can describe the robot in both settings.
+    """
+
+    rod: Rod = Rod()
+    medium: Medium = "water"
+    fluid: Fluid = Fluid()
+    ground: Ground = Ground()
+    integrator: Integrator = Integrator()
+
+    def __post_init__(self) -> None:
+        if self.medium not in ("water", "ground", "none"):
+            raise ValueError(
+                f"SimConfig.medium = {self.medium!r} is unknown; use 'water', 'ground' or 'none'"
+            )
+        for f in fields(self):
+            value = getattr(self, f.name)
+            expected = {"rod": Rod, "fluid": Fluid, "ground": Ground, "integrator": Integrator}
+            if f.name in expected and not isinstance(value, expected[f.name]):
+                raise ValueError(
+                    f"SimConfig.{f.name} must be a {expected[f.name].__name__}, "
+                    f"got {type(value).__name__}"
+                )

@@ -1,0 +1,653 @@
+"""Numba kernels of the planar discrete elastic rod (MODEL.md §2-§5a).
+
+Conventions: positions ``q`` and velocities ``v`` are flat, interleaved arrays of length 2N
+(``q[2i], q[2i+1]`` are x, y of node i) so that they index the banded Jacobian directly; the
+simulator exposes them as (N, 2) views. Rest curvatures ``kbar`` (N-2) belong to the interior
+nodes 1..N-2 (``kbar[j-1]`` at node j), rest lengths ``lbar`` (N-1) to the edges. All kernels
+take contiguous float64 arrays, write outputs in place, allocate nothing and raise nothing;
+failures come back as a status code.
+
+Parameters travel in one float64 vector ``prm`` (indices ``P_*``), per-robot scratch in
+``buf`` (rows ``B_*``, each 2N long), integer scratch in ``ibuf`` (rows ``I_*``) and step
+diagnostics in ``out`` (indices ``O_*``). A batch of robots is the same arrays with a leading
+axis, each robot stepped by the same :func:`simulate` call.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from soft_snake_gym.physics.banded import KL, band_lu, band_solve
+
+# --- parameter vector ----------------------------------------------------------------------
+P_EA, P_EI, P_DAMP, P_RHO, P_CF, P_CD, P_CA, P_A, P_B = 0, 1, 2, 3, 4, 5, 6, 7, 8
+P_MUS, P_MUD, P_VTOL, P_G = 9, 10, 11, 12
+P_H, P_SUBSTEPS, P_TOL, P_MAXIT, P_MEDIUM, P_METHOD, P_MAXSTRAIN, P_CHECKSI = (
+    13, 14, 15, 16, 17, 18, 19, 20,
+)
+N_PRM = 21
+
+MEDIUM_NONE, MEDIUM_WATER, MEDIUM_GROUND = 0, 1, 2
+METHOD_BACKWARD_EULER, METHOD_SYMPLECTIC_EULER = 0, 1
+
+# --- scratch rows ----------------------------------------------------------------------------
+B_R, B_DV, B_F, B_Q0, B_V0, B_VACC, B_M, B_FEXT, B_KEYS, B_FBRK, B_A = range(11)
+N_BUF = 11
+I_PIV, I_ORDER, I_FRICTION = 0, 1, 2
+N_IBUF = 3
+SLIDING, STUCK, BREAKAWAY = 0, 1, 2
+
+# --- diagnostics -----------------------------------------------------------------------------
+(O_STATUS, O_NITER, O_RESIDUAL, O_P_FLUID, O_P_FRICTION, O_P_ACT, O_E_FLUID, O_E_FRICTION,
+ O_E_ACT, O_W_ACT, O_TIME, O_NSTEPS) = range(12)
+N_OUT = 12
+
+# --- status codes ----------------------------------------------------------------------------
+OK, NOT_CONVERGED, NON_FINITE, SELF_INTERSECTION, RUNAWAY_STRETCH, BAD_REST_LENGTH = range(6)
+STATUS_REASONS = (
+    "ok",
+    "newton_not_converged",
+    "non_finite_state",
+    "self_intersection",
+    "runaway_stretch",
+    "non_positive_rest_length",
+)
+
+
+@njit(cache=True, inline="always")
+def _add_block(J, i, j, m00, m01, m10, m11):
+    """Add a 2x2 block to the band at node pair (i, j)."""
+    r = 2 * i
+    c = 2 * j - r + KL
+    J[r, c] += m00
+    J[r, c + 1] += m01
+    J[r + 1, c - 1] += m10
+    J[r + 1, c] += m11
+
+
+@njit(cache=True, inline="always")
+def _add_edge_pattern(J, k, s00, s01, s11):
+    """Add the pattern [[-S, S], [S, -S]] of a symmetric 2x2 S to nodes (k, k+1)."""
+    _add_block(J, k, k, -s00, -s01, -s01, -s11)
+    _add_block(J, k, k + 1, s00, s01, s01, s11)
+    _add_block(J, k + 1, k, s00, s01, s01, s11)
+    _add_block(J, k + 1, k + 1, -s00, -s01, -s01, -s11)
+
+
+@njit(cache=True)
+def turning(q, j):
+    """Turning quantities at interior node j (MODEL.md §2).
+
+    Returns:
+        (kappa, g0x, g0y, g1x, g1y, g2x, g2y, ta, tb, la, lb) packed as: kappa, the gradient
+        d phi / d x of nodes j-1, j, j+1, and the unit tangents and lengths of both edges.
+    """
+    ax = q[2 * j] - q[2 * j - 2]
+    ay = q[2 * j + 1] - q[2 * j - 1]
+    bx = q[2 * j + 2] - q[2 * j]
+    by = q[2 * j + 3] - q[2 * j + 1]
+    la = math.sqrt(ax * ax + ay * ay)
+    lb = math.sqrt(bx * bx + by * by)
+    tax, tay = ax / la, ay / la
+    tbx, tby = bx / lb, by / lb
+    cross = tax * tby - tay * tbx
+    dot = tax * tbx + tay * tby
+    kappa = 2.0 * cross / (1.0 + dot)
+    # n = (-t_y, t_x); d phi/d x_{j-1} = n_a/l_a, d phi/d x_{j+1} = n_b/l_b
+    g0x, g0y = -tay / la, tax / la
+    g2x, g2y = -tby / lb, tbx / lb
+    return kappa, g0x, g0y, -g0x - g2x, -g0y - g2y, g2x, g2y, tax, tay, tbx, tby, la, lb
+
+
+@njit(cache=True)
+def curvatures(q, kappa):
+    """Discrete curvature ``kappa_j = 2 tan(phi_j/2)`` of the interior nodes, (N-2,) [-]."""
+    for j in range(1, q.size // 2 - 1):
+        kappa[j - 1] = turning(q, j)[0]
+
+
+@njit(cache=True)
+def curvature_rates(q, v, kdot):
+    """Exact curvature rate ``(1 + kappa^2/4)(theta_dot^j - theta_dot^(j-1))``, (N-2,) [1/s]."""
+    for j in range(1, q.size // 2 - 1):
+        k, g0x, g0y, g1x, g1y, g2x, g2y = turning(q, j)[:7]
+        phidot = (g0x * v[2 * j - 2] + g0y * v[2 * j - 1] + g1x * v[2 * j] + g1y * v[2 * j + 1]
+                  + g2x * v[2 * j + 2] + g2y * v[2 * j + 3])
+        kdot[j - 1] = (1.0 + 0.25 * k * k) * phidot
+
+
+@njit(cache=True)
+def edge_lengths(q, out):
+    """Current edge lengths ``|e^k|``, (N-1,) [m]."""
+    for k in range(q.size // 2 - 1):
+        out[k] = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1])
+
+
+@njit(cache=True)
+def edge_length_rates(q, v, out):
+    """Rates ``t^k . (v[k+1] - v[k])`` of the edge lengths, (N-1,) [m/s]."""
+    for k in range(q.size // 2 - 1):
+        ex = q[2 * k + 2] - q[2 * k]
+        ey = q[2 * k + 3] - q[2 * k + 1]
+        l = math.hypot(ex, ey)
+        out[k] = (ex * (v[2 * k + 2] - v[2 * k]) + ey * (v[2 * k + 3] - v[2 * k + 1])) / l
+
+
+@njit(cache=True)
+def elastic_energy(q, kbar, lbar, prm):
+    """Stretching plus bending energy ``E_s + E_b`` (MODEL.md §3) [J]."""
+    N = q.size // 2
+    EA, EI = prm[P_EA], prm[P_EI]
+    e = 0.0
+    for k in range(N - 1):
+        l = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1])
+        s = l / lbar[k] - 1.0
+        e += 0.5 * EA * s * s * lbar[k]
+    for j in range(1, N - 1):
+        dk = turning(q, j)[0] - kbar[j - 1]
+        e += 0.5 * EI / (0.5 * (lbar[j - 1] + lbar[j])) * dk * dk
+    return e
+
+
+@njit(cache=True)
+def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
+    """Add internal (elastic, damping) and, if ``water``, drag forces into F (2N,) [N].
+
+    If ``jac``, also add ``cx dF/dq + cv dF/dv`` into the band ``J``. Omitted from the
+    Jacobian (quasi-Newton, small at h = 0.01 s): the position dependence of the damping
+    forces. Returns the power lost to drag ``-sum F_D . v_edge`` [W].
+    """
+    N = q.size // 2
+    EA, EI, d = prm[P_EA], prm[P_EI], prm[P_DAMP]
+    # stretching (MODEL.md §3): force on x[k+1] is -EA (|e|/lbar - 1) t
+    for k in range(N - 1):
+        ex = q[2 * k + 2] - q[2 * k]
+        ey = q[2 * k + 3] - q[2 * k + 1]
+        l = math.sqrt(ex * ex + ey * ey)
+        tx, ty = ex / l, ey / l
+        lb = lbar[k]
+        strain = l / lb - 1.0
+        f = -EA * strain
+        if d > 0.0:
+            f -= d * (tx * (v[2 * k + 2] - v[2 * k]) + ty * (v[2 * k + 3] - v[2 * k + 1]))
+        F[2 * k + 2] += f * tx
+        F[2 * k + 3] += f * ty
+        F[2 * k] -= f * tx
+        F[2 * k + 1] -= f * ty
+        if jac:
+            # -dF_{k+1}/dx_{k+1} = EA [t t^T / lbar + strain/l (I - t t^T)]
+            a1 = EA / lb
+            a2 = EA * strain / l
+            s00 = cx * (a1 * tx * tx + a2 * (1.0 - tx * tx)) + cv * d * tx * tx
+            s01 = cx * (a1 - a2) * tx * ty + cv * d * tx * ty
+            s11 = cx * (a1 * ty * ty + a2 * (1.0 - ty * ty)) + cv * d * ty * ty
+            _add_edge_pattern(J, k, s00, s01, s11)
+    # bending (MODEL.md §3): F = -(EI/lvor)(kappa - kbar)(1 + kappa^2/4) d phi/d x
+    for j in range(1, N - 1):
+        kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = turning(q, j)
+        kb = EI / (0.5 * (lbar[j - 1] + lbar[j]))
+        dk = kap - kbar[j - 1]
+        w = 1.0 + 0.25 * kap * kap
+        s = kb * dk * w  # dE/dphi
+        if d > 0.0:
+            phidot = (g0x * v[2 * j - 2] + g0y * v[2 * j - 1] + g1x * v[2 * j]
+                      + g1y * v[2 * j + 1] + g2x * v[2 * j + 2] + g2y * v[2 * j + 3])
+            s += d * w * w * phidot  # -d kappa_dot mapped through d kappa/d x
+        F[2 * j - 2] -= s * g0x
+        F[2 * j - 1] -= s * g0y
+        F[2 * j] -= s * g1x
+        F[2 * j + 1] -= s * g1y
+        F[2 * j + 2] -= s * g2x
+        F[2 * j + 3] -= s * g2y
+        if jac:
+            # d2E/dphi2 and the Hessians of the edge angles, H = -(t n^T + n t^T)/l^2
+            s2 = kb * (w * w + dk * 0.5 * kap * w)
+            alpha = -(cx * s2 + cv * d * w * w)
+            beta = -cx * kb * dk * w
+            ia = 1.0 / (la * la)
+            ib = 1.0 / (lbn * lbn)
+            ha00, ha01, ha11 = 2.0 * tax * tay * ia, (tay * tay - tax * tax) * ia, -2.0 * tax * tay * ia
+            hb00, hb01, hb11 = 2.0 * tbx * tby * ib, (tby * tby - tbx * tbx) * ib, -2.0 * tbx * tby * ib
+            # d2phi blocks: (0,0) -Ha, (0,1) Ha, (1,1) Hb - Ha, (1,2) -Hb, (2,2) Hb
+            _add_block(J, j - 1, j - 1, alpha * g0x * g0x - beta * ha00, alpha * g0x * g0y - beta * ha01,
+                       alpha * g0y * g0x - beta * ha01, alpha * g0y * g0y - beta * ha11)
+            _add_block(J, j - 1, j, alpha * g0x * g1x + beta * ha00, alpha * g0x * g1y + beta * ha01,
+                       alpha * g0y * g1x + beta * ha01, alpha * g0y * g1y + beta * ha11)
+            _add_block(J, j, j - 1, alpha * g1x * g0x + beta * ha00, alpha * g1x * g0y + beta * ha01,
+                       alpha * g1y * g0x + beta * ha01, alpha * g1y * g0y + beta * ha11)
+            _add_block(J, j - 1, j + 1, alpha * g0x * g2x, alpha * g0x * g2y,
+                       alpha * g0y * g2x, alpha * g0y * g2y)
+            _add_block(J, j + 1, j - 1, alpha * g2x * g0x, alpha * g2x * g0y,
+                       alpha * g2y * g0x, alpha * g2y * g0y)
+            _add_block(J, j, j, alpha * g1x * g1x + beta * (hb00 - ha00),
+                       alpha * g1x * g1y + beta * (hb01 - ha01),
+                       alpha * g1y * g1x + beta * (hb01 - ha01),
+                       alpha * g1y * g1y + beta * (hb11 - ha11))
+            _add_block(J, j, j + 1, alpha * g1x * g2x - beta * hb00, alpha * g1x * g2y - beta * hb01,
+                       alpha * g1y * g2x - beta * hb01, alpha * g1y * g2y - beta * hb11)
+            _add_block(J, j + 1, j, alpha * g2x * g1x - beta * hb00, alpha * g2x * g1y - beta * hb01,
+                       alpha * g2y * g1x - beta * hb01, alpha * g2y * g1y - beta * hb11)
+            _add_block(J, j + 1, j + 1, alpha * g2x * g2x + beta * hb00, alpha * g2x * g2y + beta * hb01,
+                       alpha * g2y * g2x + beta * hb01, alpha * g2y * g2y + beta * hb11)
+    if not water:
+        return 0.0
+    # drag (MODEL.md §4): F = -c_t l (v_t + v_t|v_t|) t - c_n l (v_n + v_n|v_n|) n, half per node
+    ct = 0.25 * prm[P_RHO] * math.pi * prm[P_CF] * (prm[P_A] + prm[P_B])
+    cn = prm[P_RHO] * prm[P_CD] * prm[P_A]
+    power = 0.0
+    for i in range(N - 1):
+        ex = q[2 * i + 2] - q[2 * i]
+        ey = q[2 * i + 3] - q[2 * i + 1]
+        l = math.sqrt(ex * ex + ey * ey)
+        tx, ty = ex / l, ey / l
+        nx, ny = -ty, tx
+        vx = 0.5 * (v[2 * i] + v[2 * i + 2])
+        vy = 0.5 * (v[2 * i + 1] + v[2 * i + 3])
+        vt = vx * tx + vy * ty
+        vn = vx * nx + vy * ny
+        gt = vt + vt * abs(vt)
+        gn = vn + vn * abs(vn)
+        fx = -ct * l * gt * tx - cn * l * gn * nx
+        fy = -ct * l * gt * ty - cn * l * gn * ny
+        power -= fx * vx + fy * vy
+        F[2 * i] += 0.5 * fx
+        F[2 * i + 1] += 0.5 * fy
+        F[2 * i + 2] += 0.5 * fx
+        F[2 * i + 3] += 0.5 * fy
+        if jac:
+            dgt = 1.0 + 2.0 * abs(vt)
+            dgn = 1.0 + 2.0 * abs(vn)
+            # d F_edge / d v_edge, a quarter of it on each of the four node blocks
+            qv = 0.25 * cv
+            c00 = -qv * l * (ct * dgt * tx * tx + cn * dgn * nx * nx)
+            c01 = -qv * l * (ct * dgt * tx * ty + cn * dgn * nx * ny)
+            c11 = -qv * l * (ct * dgt * ty * ty + cn * dgn * ny * ny)
+            # d F_edge / d e (e = x[i+1] - x[i]), half of it per node, sign by node
+            #   = -ct [gt t t^T + dgt vn t n^T + gt n n^T] - cn [gn n t^T - dgn vt n n^T - gn t n^T]
+            hx = 0.5 * cx
+            d00 = -hx * (ct * (gt * tx * tx + dgt * vn * tx * nx + gt * nx * nx)
+                         + cn * (gn * nx * tx - dgn * vt * nx * nx - gn * tx * nx))
+            d01 = -hx * (ct * (gt * tx * ty + dgt * vn * tx * ny + gt * nx * ny)
+                         + cn * (gn * nx * ty - dgn * vt * nx * ny - gn * tx * ny))
+            d10 = -hx * (ct * (gt * ty * tx + dgt * vn * ty * nx + gt * ny * nx)
+                         + cn * (gn * ny * tx - dgn * vt * ny * nx - gn * ty * nx))
+            d11 = -hx * (ct * (gt * ty * ty + dgt * vn * ty * ny + gt * ny * ny)
+                         + cn * (gn * ny * ty - dgn * vt * ny * ny - gn * ty * ny))
+            for a in (i, i + 1):
+                _add_block(J, a, i, c00 - d00, c01 - d01, c01 - d10, c11 - d11)
+                _add_block(J, a, i + 1, c00 + d00, c01 + d01, c01 + d10, c11 + d11)
+    return power
+
+
+@njit(cache=True)
+def added_mass(q, prm, dv, out, J, coef, apply, jac):
+    """Added mass of MODEL.md §4: ``M_A`` puts ``mu_n/4 n n^T`` on the four blocks of each
+    edge, ``mu_n = rho pi C_A a^2 l``. If ``apply``, add ``M_A dv`` to ``out``; if ``jac``,
+    add ``coef M_A`` to the band ``J``."""
+    N = q.size // 2
+    cm = prm[P_RHO] * math.pi * prm[P_CA] * prm[P_A] * prm[P_A]
+    for i in range(N - 1):
+        ex = q[2 * i + 2] - q[2 * i]
+        ey = q[2 * i + 3] - q[2 * i + 1]
+        l = math.sqrt(ex * ex + ey * ey)
+        nx, ny = -ey / l, ex / l
+        mu = 0.25 * cm * l
+        if apply:
+            an = mu * (nx * (dv[2 * i] + dv[2 * i + 2]) + ny * (dv[2 * i + 1] + dv[2 * i + 3]))
+            out[2 * i] += an * nx
+            out[2 * i + 1] += an * ny
+            out[2 * i + 2] += an * nx
+            out[2 * i + 3] += an * ny
+        if jac:
+            m00, m01, m11 = coef * mu * nx * nx, coef * mu * nx * ny, coef * mu * ny * ny
+            for a in (i, i + 1):
+                for b in (i, i + 1):
+                    _add_block(J, a, b, m00, m01, m01, m11)
+
+
+@njit(cache=True)
+def solve_mass(q, prm, m, F, a, J, piv, water):
+    """Accelerations ``a`` from ``(M + M_A(q)) a = F`` by a banded solve (``M_A = 0`` unless
+    ``water``); ``m`` is the node mass per coordinate (2N,)."""
+    n = q.size
+    if not water:
+        for i in range(n):
+            a[i] = F[i] / m[i]
+        return
+    J[:, :] = 0.0
+    for i in range(n):
+        J[i, KL] = m[i]
+        a[i] = F[i]
+    added_mass(q, prm, a, a, J, 1.0, False, True)
+    band_lu(J, piv, n)
+    band_solve(J, piv, n, a)
+
+
+@njit(cache=True)
+def actuator_power(q, kbar, lbar, u_k, u_l, prm):
+    """Power the inputs put into the body, ``dE/dkbar . u_k + dE/dlbar . u_l`` (MODEL.md §3) [W]."""
+    N = q.size // 2
+    EA, EI = prm[P_EA], prm[P_EI]
+    p = 0.0
+    for j in range(1, N - 1):
+        lv = 0.5 * (lbar[j - 1] + lbar[j])
+        dk = turning(q, j)[0] - kbar[j - 1]
+        p -= EI / lv * dk * u_k[j - 1]
+        p -= 0.25 * EI * dk * dk / (lv * lv) * (u_l[j - 1] + u_l[j])
+    for k in range(N - 1):
+        r = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1]) / lbar[k]
+        p -= 0.5 * EA * (r * r - 1.0) * u_l[k]
+    return p
+
+
+@njit(cache=True)
+def _segments_cross(q, a, b):
+    """True if edges a and b cross properly (a shared end or a mere touch does not count)."""
+    p1x, p1y, p2x, p2y = q[2 * a], q[2 * a + 1], q[2 * a + 2], q[2 * a + 3]
+    p3x, p3y, p4x, p4y = q[2 * b], q[2 * b + 1], q[2 * b + 2], q[2 * b + 3]
+    d1 = (p2x - p1x) * (p3y - p1y) - (p2y - p1y) * (p3x - p1x)
+    d2 = (p2x - p1x) * (p4y - p1y) - (p2y - p1y) * (p4x - p1x)
+    d3 = (p4x - p3x) * (p1y - p3y) - (p4y - p3y) * (p1x - p3x)
+    d4 = (p4x - p3x) * (p2y - p3y) - (p4y - p3y) * (p2x - p3x)
+    return d1 * d2 < 0.0 and d3 * d4 < 0.0
+
+
+@njit(cache=True)
+def self_intersects(q, keys, order):
+    """Sweep and prune over the edges' x-extents; ``order`` (N-1,) persists between calls, so
+    the insertion sort is nearly linear for a body that moves a little each step."""
+    ne = q.size // 2 - 1
+    for e in range(ne):
+        keys[e] = min(q[2 * e], q[2 * e + 2])
+    for i in range(1, ne):
+        o = order[i]
+        kv = keys[o]
+        j = i - 1
+        while j >= 0 and keys[order[j]] > kv:
+            order[j + 1] = order[j]
+            j -= 1
+        order[j + 1] = o
+    for ii in range(ne):
+        a = order[ii]
+        xmax = max(q[2 * a], q[2 * a + 2])
+        for jj in range(ii + 1, ne):
+            b = order[jj]
+            if keys[b] > xmax:
+                break
+            if abs(a - b) >= 2 and _segments_cross(q, a, b):
+                return True
+    return False
+
+
+@njit(cache=True)
+def check_state(q, v, lbar, prm, buf, ibuf):
+    """Status code of a state: non-finite, runaway stretch, or self-intersection."""
+    n = q.size
+    for i in range(n):
+        if not (math.isfinite(q[i]) and math.isfinite(v[i])):
+            return NON_FINITE
+    max_strain = prm[P_MAXSTRAIN]
+    for k in range(n // 2 - 1):
+        l = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1])
+        if abs(l / lbar[k] - 1.0) > max_strain:
+            return RUNAWAY_STRETCH
+    if prm[P_CHECKSI] != 0.0 and self_intersects(q, buf[B_KEYS], ibuf[I_ORDER]):
+        return SELF_INTERSECTION
+    return OK
+
+
+@njit(cache=True)
+def _classify_friction(q, v, kbar, lbar, prm, buf, J, ibuf):
+    """Karnopp classification at the start of a step (MODEL.md §5): a slow node whose other
+    forces stay within ``mu_s F_N`` sticks; a slow node pushed harder breaks away with a
+    kinetic friction opposing the push; a moving node slides."""
+    n = q.size
+    F = buf[B_F]
+    fext = buf[B_FEXT]
+    for i in range(n):
+        F[i] = fext[i]
+    assemble(q, v, kbar, lbar, prm, F, J, 0.0, 0.0, False, False)
+    m = buf[B_M]
+    fbrk = buf[B_FBRK]
+    state = ibuf[I_FRICTION]
+    for i in range(n // 2):
+        fn = m[2 * i] * prm[P_G]
+        fbrk[2 * i] = 0.0
+        fbrk[2 * i + 1] = 0.0
+        if math.hypot(v[2 * i], v[2 * i + 1]) >= prm[P_VTOL]:
+            state[i] = SLIDING
+            continue
+        fo = math.hypot(F[2 * i], F[2 * i + 1])
+        if fo <= prm[P_MUS] * fn:
+            state[i] = STUCK
+            v[2 * i] = 0.0
+            v[2 * i + 1] = 0.0
+        else:
+            state[i] = BREAKAWAY
+            fbrk[2 * i] = -prm[P_MUD] * fn * F[2 * i] / fo
+            fbrk[2 * i + 1] = -prm[P_MUD] * fn * F[2 * i + 1] / fo
+
+
+@njit(cache=True)
+def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
+    """Residual ``R = (M + M_A)(v - v0) - dt F(q0 + dt v, v)`` of backward Euler at the trial
+    velocity ``v`` (also writes ``q``), and if ``jac`` its Jacobian into J. Returns
+    (squared 2-norm, max-norm, fluid power, friction power)."""
+    n = q.size
+    q0, v0, F, R, m = buf[B_Q0], buf[B_V0], buf[B_F], buf[B_R], buf[B_M]
+    fext = buf[B_FEXT]
+    dv = buf[B_A]
+    for i in range(n):
+        q[i] = q0[i] + dt * v[i]
+        F[i] = fext[i]
+        dv[i] = v[i] - v0[i]
+    if jac:
+        J[:, :] = 0.0
+    water = medium == MEDIUM_WATER
+    p_fluid = assemble(q, v, kbar, lbar, prm, F, J, -dt * dt, -dt, jac, water)
+    for i in range(n):
+        R[i] = m[i] * dv[i] - dt * F[i]
+    if jac:
+        for i in range(n):
+            J[i, KL] += m[i]
+    if water:
+        added_mass(q, prm, dv, R, J, 1.0, True, jac)
+    p_fric = 0.0
+    if medium == MEDIUM_GROUND:
+        state = ibuf[I_FRICTION]
+        fbrk = buf[B_FBRK]
+        eps2 = (1e-2 * prm[P_VTOL]) ** 2
+        for i in range(n // 2):
+            r0, r1 = 2 * i, 2 * i + 1
+            if state[i] == STUCK:
+                R[r0] = v[r0]
+                R[r1] = v[r1]
+                if jac:
+                    J[r0, :] = 0.0
+                    J[r1, :] = 0.0
+                    J[r0, KL] = 1.0
+                    J[r1, KL] = 1.0
+            elif state[i] == BREAKAWAY:
+                R[r0] -= dt * fbrk[r0]
+                R[r1] -= dt * fbrk[r1]
+                p_fric -= fbrk[r0] * v[r0] + fbrk[r1] * v[r1]
+            else:
+                c = prm[P_MUD] * m[r0] * prm[P_G]
+                vx, vy = v[r0], v[r1]
+                s = math.sqrt(vx * vx + vy * vy + eps2)
+                R[r0] += dt * c * vx / s
+                R[r1] += dt * c * vy / s
+                p_fric += c * (vx * vx + vy * vy) / s
+                if jac:
+                    s3 = s * s * s
+                    _add_block(J, i, i, dt * c * (1.0 / s - vx * vx / s3), -dt * c * vx * vy / s3,
+                               -dt * c * vx * vy / s3, dt * c * (1.0 / s - vy * vy / s3))
+    norm2 = 0.0
+    rmax = 0.0
+    for i in range(n):
+        norm2 += R[i] * R[i]
+        rmax = max(rmax, abs(R[i]))
+    return norm2, rmax, p_fluid, p_fric
+
+
+@njit(cache=True)
+def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
+    """One backward-Euler step by damped Newton on the banded analytic Jacobian (MODEL.md §5a).
+    Returns (status, iterations, residual, fluid power, friction power)."""
+    n = q.size
+    q0, v0, vacc, dv = buf[B_Q0], buf[B_V0], buf[B_VACC], buf[B_DV]
+    R = buf[B_R]
+    piv = ibuf[I_PIV]
+    tol = prm[P_TOL]
+    maxit = int(prm[P_MAXIT])
+    if medium == MEDIUM_GROUND:
+        _classify_friction(q, v, kbar, lbar, prm, buf, J, ibuf)
+    for i in range(n):
+        q0[i] = q[i]
+        v0[i] = v[i]
+    norm2, rmax, p_fluid, p_fric = _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, True)
+    it = 0
+    while rmax > tol:
+        if it == maxit or not math.isfinite(norm2):
+            return NOT_CONVERGED, it, rmax, p_fluid, p_fric
+        it += 1
+        for i in range(n):
+            vacc[i] = v[i]
+            dv[i] = -R[i]
+        if not band_lu(J, piv, n):
+            return NOT_CONVERGED, it, rmax, p_fluid, p_fric
+        band_solve(J, piv, n, dv)
+        step = 1.0
+        for _ in range(12):  # backtracking line search on |R|^2
+            for i in range(n):
+                v[i] = vacc[i] + step * dv[i]
+            trial = _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, True)
+            if trial[0] < norm2 * (1.0 - 1e-4 * step):
+                break
+            step *= 0.5
+        norm2, rmax, p_fluid, p_fric = trial
+        if medium == MEDIUM_GROUND:
+            # Coulomb friction stops a sliding node within the step rather than reversing it
+            state = ibuf[I_FRICTION]
+            changed = False
+            for i in range(n // 2):
+                if state[i] == SLIDING and v[2 * i] * v0[2 * i] + v[2 * i + 1] * v0[2 * i + 1] <= 0.0:
+                    state[i] = STUCK
+                    v[2 * i] = 0.0
+                    v[2 * i + 1] = 0.0
+                    changed = True
+            if changed:
+                norm2, rmax, p_fluid, p_fric = _be_residual(
+                    q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, True
+                )
+    return OK, it, rmax, p_fluid, p_fric
+
+
+@njit(cache=True)
+def _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
+    """One explicit semi-implicit (symplectic) Euler step: kick with F(q, v), then drift.
+    On the ground, explicit Karnopp friction; a sliding node is stopped, not reversed.
+    Returns (fluid power, friction power) at the start of the step."""
+    n = q.size
+    F, a, m, fext = buf[B_F], buf[B_A], buf[B_M], buf[B_FEXT]
+    for i in range(n):
+        F[i] = fext[i]
+    p_fluid = assemble(q, v, kbar, lbar, prm, F, J, 0.0, 0.0, False, medium == MEDIUM_WATER)
+    solve_mass(q, prm, m, F, a, J, ibuf[I_PIV], medium == MEDIUM_WATER)
+    p_fric = 0.0
+    if medium == MEDIUM_GROUND:
+        state = ibuf[I_FRICTION]
+        for i in range(n // 2):
+            r0, r1 = 2 * i, 2 * i + 1
+            fn = m[r0] * prm[P_G]
+            speed = math.hypot(v[r0], v[r1])
+            fo = math.hypot(F[r0], F[r1])
+            if speed < prm[P_VTOL]:
+                if fo <= prm[P_MUS] * fn:
+                    state[i] = STUCK
+                    v[r0] = 0.0
+                    v[r1] = 0.0
+                    a[r0] = 0.0
+                    a[r1] = 0.0
+                    continue
+                state[i] = BREAKAWAY
+                fx, fy = -prm[P_MUD] * fn * F[r0] / fo, -prm[P_MUD] * fn * F[r1] / fo
+            else:
+                state[i] = SLIDING
+                fx, fy = -prm[P_MUD] * fn * v[r0] / speed, -prm[P_MUD] * fn * v[r1] / speed
+            p_fric -= fx * v[r0] + fy * v[r1]
+            a[r0] += fx / m[r0]
+            a[r1] += fy / m[r1]
+            if state[i] == SLIDING and (v[r0] + dt * a[r0]) * v[r0] + (v[r1] + dt * a[r1]) * v[r1] < 0.0:
+                a[r0] = -v[r0] / dt
+                a[r1] = -v[r1] / dt
+    for i in range(n):
+        v[i] += dt * a[i]
+        q[i] += dt * v[i]
+    return p_fluid, p_fric
+
+
+@njit(cache=True)
+def simulate(q, v, kbar, lbar, u_k, u_l, prm, buf, J, ibuf, out, n_steps):
+    """Advance one robot by ``n_steps`` steps of ``h`` with inputs held constant; stops at the
+    first failure. Per step: rest shape moves by ``dt u`` each sub-step, the state follows by
+    the chosen integrator, then the state is checked. Writes diagnostics into ``out`` and
+    returns the status code (``OK`` = 0)."""
+    h = prm[P_H]
+    nsub = int(prm[P_SUBSTEPS])
+    dt = h / nsub
+    medium = int(prm[P_MEDIUM])
+    symplectic = int(prm[P_METHOD]) == METHOD_SYMPLECTIC_EULER
+    status = OK
+    for _ in range(n_steps):
+        e_fluid = 0.0
+        e_fric = 0.0
+        e_act = 0.0
+        niter = 0
+        resid = 0.0
+        for _s in range(nsub):
+            for j in range(kbar.size):
+                kbar[j] += dt * u_k[j]
+            for k in range(lbar.size):
+                lbar[k] += dt * u_l[k]
+                if not lbar[k] > 0.0:
+                    status = BAD_REST_LENGTH
+            if status != OK:
+                break
+            if symplectic:
+                p_act = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+                p_fluid, p_fric = _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium)
+            else:
+                status, it, res, p_fluid, p_fric = _be_substep(
+                    q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium
+                )
+                niter = max(niter, it)
+                resid = max(resid, res)
+                p_act = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+            e_fluid += dt * p_fluid
+            e_fric += dt * p_fric
+            e_act += dt * p_act
+            if status != OK:
+                break
+        if status == OK or status == NOT_CONVERGED:
+            check = check_state(q, v, lbar, prm, buf, ibuf)
+            if check != OK:
+                status = check
+        out[O_STATUS] = status
+        out[O_NITER] = niter
+        out[O_RESIDUAL] = resid
+        out[O_P_FLUID] = e_fluid / h
+        out[O_P_FRICTION] = e_fric / h
+        out[O_P_ACT] = e_act / h
+        out[O_E_FLUID] += e_fluid
+        out[O_E_FRICTION] += e_fric
+        out[O_E_ACT] += abs(e_act)
+        out[O_W_ACT] += e_act
+        out[O_TIME] += h
+        out[O_NSTEPS] += 1
+        if status != OK:
+            return status
+    return status

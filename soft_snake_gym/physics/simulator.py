@@ -1,0 +1,438 @@
+"""The :class:`Simulator`: one soft robot, its state arrays and buffers, stepped by kernels."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from soft_snake_gym.params import SimConfig
+from soft_snake_gym.physics import kernels as K
+from soft_snake_gym.physics.banded import WIDTH
+
+__all__ = ["Simulator", "SimulationError", "body_from_curvature", "node_masses", "pack_params"]
+
+_MEDIA = {"none": K.MEDIUM_NONE, "water": K.MEDIUM_WATER, "ground": K.MEDIUM_GROUND}
+_METHODS = {"backward_euler": K.METHOD_BACKWARD_EULER, "symplectic_euler": K.METHOD_SYMPLECTIC_EULER}
+
+
+class SimulationError(RuntimeError):
+    """Stepping a simulator whose state has failed (see :attr:`Simulator.failure`)."""
+
+
+def node_masses(config: SimConfig) -> np.ndarray:
+    """Lumped node masses ``m_0 = m/2, m_k = m, m_(N-1) = m/2`` (MODEL.md §3), (N,) [kg]."""
+    m = np.full(config.rod.N, config.rod.edge_mass)
+    m[0] = m[-1] = 0.5 * config.rod.edge_mass
+    return m
+
+
+def auto_substeps(config: SimConfig) -> int:
+    """Sub-steps per ``h``: 1 for backward Euler; for the explicit method enough that each is
+    at most ``0.5 / omega_max``, with a Gershgorin bound on the highest elastic frequency."""
+    integ, rod = config.integrator, config.rod
+    if integ.substeps is not None:
+        return integ.substeps
+    if integ.method == "backward_euler":
+        return 1
+    l0 = rod.edge_length
+    omega_max = 2.0 * math.sqrt((rod.EA / l0 + 16.0 * rod.EI / l0**3) / rod.edge_mass)
+    return max(1, math.ceil(integ.h * omega_max / 0.5))
+
+
+def pack_params(config: SimConfig, prm: np.ndarray) -> None:
+    """Write a config into the kernels' parameter vector ``prm`` (``K.N_PRM``,)."""
+    rod, fl, gr, it = config.rod, config.fluid, config.ground, config.integrator
+    prm[K.P_EA] = rod.EA
+    prm[K.P_EI] = rod.EI
+    prm[K.P_DAMP] = rod.damping
+    prm[K.P_RHO] = fl.rho
+    prm[K.P_CF] = fl.C_f
+    prm[K.P_CD] = fl.C_D
+    prm[K.P_CA] = fl.C_A
+    prm[K.P_A] = rod.a
+    prm[K.P_B] = rod.b
+    prm[K.P_MUS] = gr.mu_s
+    prm[K.P_MUD] = gr.mu_d
+    prm[K.P_VTOL] = gr.V_tol
+    prm[K.P_G] = gr.g
+    prm[K.P_H] = it.h
+    prm[K.P_SUBSTEPS] = auto_substeps(config)
+    prm[K.P_TOL] = it.newton_tol
+    prm[K.P_MAXIT] = it.newton_max_iter
+    prm[K.P_MEDIUM] = _MEDIA[config.medium]
+    prm[K.P_METHOD] = _METHODS[it.method]
+    prm[K.P_MAXSTRAIN] = it.max_strain
+    prm[K.P_CHECKSI] = float(it.check_self_intersection)
+
+
+def body_from_curvature(
+    kbar: np.ndarray,
+    lbar: np.ndarray,
+    heading: float = 0.0,
+    com: tuple[float, float] = (0.0, 0.0),
+) -> np.ndarray:
+    """Node positions of a body at rest in the shape of a curvature profile.
+
+    Integrates the turning angles ``phi_j = 2 atan(kbar_j / 2)`` along the edges, then turns
+    the body so that the tail-to-head chord points along ``heading`` (0: +x, head at node
+    N-1 ahead) and moves its centre of mass (lumped masses, uniform edges) to ``com``.
+
+    Args:
+        kbar: curvatures of the interior nodes, (N-2,) [-].
+        lbar: edge lengths, (N-1,) [m].
+        heading: direction of the chord [rad].
+        com: centre of mass [m].
+
+    Returns:
+        Positions, (N, 2) [m].
+    """
+    kbar = np.asarray(kbar, dtype=float)
+    lbar = np.asarray(lbar, dtype=float)
+    if kbar.ndim != 1 or lbar.ndim != 1 or kbar.size != lbar.size - 1:
+        raise ValueError(
+            f"kbar has shape {kbar.shape} and lbar {lbar.shape}: need (N-2,) and (N-1,)"
+        )
+    theta = np.concatenate(([0.0], np.cumsum(2.0 * np.arctan(kbar / 2.0))))
+    x = np.zeros((lbar.size + 1, 2))
+    x[1:, 0] = np.cumsum(lbar * np.cos(theta))
+    x[1:, 1] = np.cumsum(lbar * np.sin(theta))
+    chord = x[-1] - x[0]
+    turn = heading - math.atan2(chord[1], chord[0]) if np.hypot(*chord) > 0 else heading
+    c, s = math.cos(turn), math.sin(turn)
+    x = x @ np.array([[c, s], [-s, c]])
+    w = np.ones(x.shape[0])
+    w[0] = w[-1] = 0.5
+    return x - (w @ x) / w.sum() + np.asarray(com, dtype=float)
+
+
+def _as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != shape:
+        raise ValueError(f"{name} has shape {arr.shape}; expected {shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = np.flatnonzero(~np.isfinite(arr.ravel()))
+        raise ValueError(f"{name} has non-finite entries at flat indices {bad.tolist()[:8]}")
+    return arr
+
+
+class Simulator:
+    """A planar discrete elastic rod in water, on the ground, or in vacuum (MODEL.md).
+
+    The simulator allocates its arrays once; :meth:`reset` and :meth:`set_state` write into
+    them, :meth:`set_config` changes physical parameters in place (for per-episode
+    randomization) without rebuilding anything. Steps run entirely in numba kernels.
+
+    State (read as copies): ``x``, ``v`` (N, 2) [m, m/s], ``kbar`` (N-2,) [-], ``lbar`` (N-1,)
+    [m]. Inputs to :meth:`step`: curvature rates ``u_k`` (N-2,) [1/s] and length rates ``u_l``
+    (N-1,) [m/s], held over the step ``h``.
+
+    A step that fails (Newton not converged, non-finite state, self-intersection, runaway
+    stretch, a non-positive rest length) sets :attr:`failure` to the reason; stepping again
+    raises :class:`SimulationError` until :meth:`reset` or :meth:`set_state`.
+
+    Example:
+        >>> sim = Simulator()
+        >>> sim.step(u_k=np.full(sim.N - 2, 0.1))
+        >>> sim.kappa.round(4)[:2]
+        array([0.001, 0.001])
+    """
+
+    def __init__(self, config: SimConfig | None = None) -> None:
+        config = SimConfig() if config is None else config
+        if not isinstance(config, SimConfig):
+            raise TypeError(f"config must be a SimConfig, got {type(config).__name__}")
+        self.N = N = config.rod.N
+        self._q = np.zeros(2 * N)
+        self._v = np.zeros(2 * N)
+        self._kbar = np.zeros(N - 2)
+        self._lbar = np.zeros(N - 1)
+        self._prm = np.zeros(K.N_PRM)
+        self._buf = np.zeros((K.N_BUF, 2 * N))
+        self._J = np.zeros((2 * N, WIDTH))
+        self._ibuf = np.zeros((K.N_IBUF, 2 * N), dtype=np.int64)
+        self._out = np.zeros(K.N_OUT)
+        self._zero_k = np.zeros(N - 2)
+        self._zero_l = np.zeros(N - 1)
+        self._scratch_k = np.zeros(N - 2)
+        self._scratch_l = np.zeros(N - 1)
+        self.failure: str | None = None
+        self.set_config(config)
+        self.reset()
+
+    # --- configuration and state ---------------------------------------------------------
+    def set_config(self, config: SimConfig) -> None:
+        """Change the physical and numerical parameters in place (same N)."""
+        if config.rod.N != self.N:
+            raise ValueError(
+                f"config.rod.N = {config.rod.N} differs from this simulator's N = {self.N}; "
+                "build a new Simulator to change the number of nodes"
+            )
+        self.config = config
+        pack_params(config, self._prm)
+        self._m = node_masses(config)
+        self._buf[K.B_M, 0::2] = self._m
+        self._buf[K.B_M, 1::2] = self._m
+
+    def replace_config(self, **sections) -> None:
+        """Shortcut: ``sim.replace_config(fluid=Fluid(rho=0))``."""
+        self.set_config(replace(self.config, **sections))
+
+    @property
+    def h(self) -> float:
+        """Step [s]."""
+        return self.config.integrator.h
+
+    @property
+    def substeps(self) -> int:
+        """Internal sub-steps per step."""
+        return int(self._prm[K.P_SUBSTEPS])
+
+    def reset(self, x=None, v=None, kbar=None, lbar=None) -> None:
+        """Start over: by default a straight body at rest along +x, centre of mass at the
+        origin, rest shape straight with the configured edge length; clears accumulated
+        energies, time and any failure."""
+        rod = self.config.rod
+        self._kbar[:] = 0.0
+        self._lbar[:] = rod.edge_length
+        if x is None:
+            x = body_from_curvature(self._kbar if kbar is None else kbar,
+                                    self._lbar if lbar is None else lbar)
+        self._q[:] = 0.0
+        self._v[:] = 0.0
+        self._out[:] = 0.0
+        self._buf[K.B_FEXT] = 0.0
+        self.set_state(x=x, v=v, kbar=kbar, lbar=lbar)
+
+    def set_state(self, x=None, v=None, kbar=None, lbar=None) -> None:
+        """Overwrite any part of the state; the others are kept. Clears a failure."""
+        N = self.N
+        new_x = None if x is None else _as_array("x", x, (N, 2))
+        new_v = None if v is None else _as_array("v", v, (N, 2))
+        new_k = None if kbar is None else _as_array("kbar", kbar, (N - 2,))
+        new_l = None if lbar is None else _as_array("lbar", lbar, (N - 1,))
+        if new_l is not None and np.any(new_l <= 0):
+            raise ValueError(f"lbar must be positive, got min {new_l.min()!r}")
+        if new_x is not None:
+            lengths = np.hypot(*np.diff(new_x, axis=0).T)
+            if np.any(lengths <= 0):
+                raise ValueError(
+                    f"x puts nodes {np.flatnonzero(lengths <= 0).tolist()} on top of their "
+                    "successors: every edge needs a positive length"
+                )
+            self._q[:] = new_x.ravel()
+        if new_v is not None:
+            self._v[:] = new_v.ravel()
+        if new_k is not None:
+            self._kbar[:] = new_k
+        if new_l is not None:
+            self._lbar[:] = new_l
+        self._ibuf[K.I_ORDER, : N - 1] = np.argsort(
+            np.minimum(self._q[0:-2:2], self._q[2::2]), kind="stable"
+        )
+        self._ibuf[K.I_FRICTION] = K.SLIDING
+        self.failure = None
+
+    def set_external_force(self, force=None) -> None:
+        """Apply a constant external force to each node, (N, 2) [N]; ``None`` removes it."""
+        if force is None:
+            self._buf[K.B_FEXT] = 0.0
+        else:
+            self._buf[K.B_FEXT] = _as_array("force", force, (self.N, 2)).ravel()
+
+    # --- stepping ------------------------------------------------------------------------
+    def _inputs(self, u_k, u_l) -> tuple[np.ndarray, np.ndarray]:
+        if u_k is None:
+            uk = self._zero_k
+        elif isinstance(u_k, np.ndarray) and u_k.shape == (self.N - 2,) and u_k.dtype == np.float64:
+            uk = u_k
+        else:
+            uk = _as_array("u_k", u_k, (self.N - 2,))
+        if u_l is None:
+            ul = self._zero_l
+        elif isinstance(u_l, np.ndarray) and u_l.shape == (self.N - 1,) and u_l.dtype == np.float64:
+            ul = u_l
+        else:
+            ul = _as_array("u_l", u_l, (self.N - 1,))
+        if not (np.isfinite(uk.sum()) and np.isfinite(ul.sum())):
+            _as_array("u_k", uk, uk.shape)
+            _as_array("u_l", ul, ul.shape)
+        return uk, ul
+
+    def step(self, u_k=None, u_l=None) -> bool:
+        """Advance by ``h`` with curvature rates ``u_k`` (N-2,) and length rates ``u_l``
+        (N-1,) held constant (``None``: zero). Returns True if the step succeeded; on failure
+        :attr:`failure` names the reason."""
+        return self.advance(1, u_k, u_l)
+
+    def advance(self, n_steps: int, u_k=None, u_l=None) -> bool:
+        """Advance by ``n_steps`` steps in one compiled call (inputs constant throughout)."""
+        if self.failure is not None:
+            raise SimulationError(
+                f"the simulation failed ({self.failure}) at t = {self.time:.3f} s; "
+                "call reset() or set_state() before stepping again"
+            )
+        uk, ul = self._inputs(u_k, u_l)
+        status = K.simulate(self._q, self._v, self._kbar, self._lbar, uk, ul, self._prm,
+                            self._buf, self._J, self._ibuf, self._out, n_steps)
+        if status != K.OK:
+            self.failure = K.STATUS_REASONS[status]
+            return False
+        return True
+
+    # --- observables ---------------------------------------------------------------------
+    @property
+    def x(self) -> np.ndarray:
+        """Node positions, (N, 2) [m] (a copy)."""
+        return self._q.reshape(self.N, 2).copy()
+
+    @property
+    def v(self) -> np.ndarray:
+        """Node velocities, (N, 2) [m/s] (a copy)."""
+        return self._v.reshape(self.N, 2).copy()
+
+    @property
+    def kbar(self) -> np.ndarray:
+        """Rest curvatures, (N-2,) [-] (a copy)."""
+        return self._kbar.copy()
+
+    @property
+    def lbar(self) -> np.ndarray:
+        """Rest lengths, (N-1,) [m] (a copy)."""
+        return self._lbar.copy()
+
+    @property
+    def kappa(self) -> np.ndarray:
+        """Curvatures ``2 tan(phi/2)`` of the interior nodes, (N-2,) [-]."""
+        out = np.empty(self.N - 2)
+        K.curvatures(self._q, out)
+        return out
+
+    @property
+    def kappa_dot(self) -> np.ndarray:
+        """Exact curvature rates (MODEL.md §2), (N-2,) [1/s]."""
+        out = np.empty(self.N - 2)
+        K.curvature_rates(self._q, self._v, out)
+        return out
+
+    @property
+    def edge_lengths(self) -> np.ndarray:
+        """Current edge lengths ``|e^k|``, (N-1,) [m]."""
+        out = np.empty(self.N - 1)
+        K.edge_lengths(self._q, out)
+        return out
+
+    @property
+    def edge_length_rates(self) -> np.ndarray:
+        """Rates of the edge lengths, (N-1,) [m/s]."""
+        out = np.empty(self.N - 1)
+        K.edge_length_rates(self._q, self._v, out)
+        return out
+
+    @property
+    def com(self) -> np.ndarray:
+        """Centre of mass, (2,) [m]."""
+        return self._m @ self._q.reshape(self.N, 2) / self._m.sum()
+
+    @property
+    def com_velocity(self) -> np.ndarray:
+        """Velocity of the centre of mass, (2,) [m/s]."""
+        return self._m @ self._v.reshape(self.N, 2) / self._m.sum()
+
+    @property
+    def heading(self) -> float:
+        """Direction of the tail-to-head chord ``x[N-1] - x[0]`` [rad]."""
+        q = self._q
+        return math.atan2(q[-1] - q[1], q[-2] - q[0])
+
+    @property
+    def masses(self) -> np.ndarray:
+        """Lumped node masses, (N,) [kg]."""
+        return self._m.copy()
+
+    @property
+    def stuck(self) -> np.ndarray:
+        """Which nodes stuck to the ground in the last step, (N,) bool (all False off ground)."""
+        if self.config.medium != "ground":
+            return np.zeros(self.N, dtype=bool)
+        return self._ibuf[K.I_FRICTION, : self.N] == K.STUCK
+
+    def elastic_energy(self) -> float:
+        """Stretching plus bending energy [J]."""
+        return float(K.elastic_energy(self._q, self._kbar, self._lbar, self._prm))
+
+    def kinetic_energy(self) -> float:
+        """Kinetic energy of the nodes (not of the entrained water) [J]."""
+        return float(0.5 * self._buf[K.B_M] @ (self._v * self._v))
+
+    def elastic_forces(self) -> np.ndarray:
+        """Elastic plus damping forces on the nodes, (N, 2) [N]."""
+        F = np.zeros(2 * self.N)
+        K.assemble(self._q, self._v, self._kbar, self._lbar, self._prm, F, self._J,
+                   0.0, 0.0, False, False)
+        return F.reshape(self.N, 2)
+
+    def force_jacobians(self, water: bool | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Forces and their analytic Jacobians ``dF/dx`` and ``dF/dv`` as dense (2N, 2N)
+        matrices in interleaved (x0, y0, x1, ...) order: elastic, damping and (in water)
+        drag. For checking and analysis; the stepper uses the banded form."""
+        from soft_snake_gym.physics.banded import band_to_dense
+
+        water = self.config.medium == "water" if water is None else water
+        n = 2 * self.N
+        F = np.zeros(n)
+        mats = []
+        for cx, cv in ((1.0, 0.0), (0.0, 1.0)):
+            F[:] = 0.0
+            J = np.zeros((n, WIDTH))
+            K.assemble(self._q, self._v, self._kbar, self._lbar, self._prm, F, J, cx, cv, True, water)
+            mats.append(band_to_dense(J, n))
+        return F.copy(), mats[0], mats[1]
+
+    # --- metrics of the last step and accumulated ------------------------------------------
+    @property
+    def time(self) -> float:
+        """Simulated time since the last reset [s]."""
+        return float(self._out[K.O_TIME])
+
+    @property
+    def newton_iterations(self) -> int:
+        """Newton iterations of the last step (0 for the explicit integrator)."""
+        return int(self._out[K.O_NITER])
+
+    @property
+    def fluid_power(self) -> float:
+        """Power lost to drag over the last step, ``-sum F_D . v >= 0`` [W]."""
+        return float(self._out[K.O_P_FLUID])
+
+    @property
+    def friction_power(self) -> float:
+        """Power lost to ground friction over the last step [W]."""
+        return float(self._out[K.O_P_FRICTION])
+
+    @property
+    def actuator_power(self) -> float:
+        """Power of the inputs on the body over the last step (signed) [W]."""
+        return float(self._out[K.O_P_ACT])
+
+    @property
+    def fluid_energy(self) -> float:
+        """Energy lost to drag since reset [J]."""
+        return float(self._out[K.O_E_FLUID])
+
+    @property
+    def friction_work(self) -> float:
+        """Work done against friction since reset [J]."""
+        return float(self._out[K.O_E_FRICTION])
+
+    @property
+    def actuator_energy(self) -> float:
+        """Actuator energy since reset, the sum over steps of |work| [J] (a real actuator
+        does not get back the work the body does on it)."""
+        return float(self._out[K.O_E_ACT])
+
+    @property
+    def actuator_work(self) -> float:
+        """Signed actuator work since reset [J]."""
+        return float(self._out[K.O_W_ACT])
