@@ -1,0 +1,124 @@
+"""Inching on land (MODEL.md §6-§7): a compression wave of the rest lengths.
+
+``lbar_des,k(t) = l0 (1 - eps (1 + sin(omega t - direction delta_l k)) / 2)``.
+
+Measured direction (thesis worm, mu_s = 1.15, mu_d = 0.8, 10 s, open loop, eps = 0.3,
+omega = 2 pi): with ``direction = +1`` (the wave travels from tail to head) and
+``delta_l = 2 pi / 9`` (one wave along the 9 edges) the worm moves **forward, toward the
+head**, by about 0.11 m; ``direction = -1`` moves it backward by the same amount. For
+``delta_l`` above pi the direction flips (the wave aliases to the other direction). These are
+the defaults.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from soft_snake_gym.gaits import length_wave
+from soft_snake_gym.policies.base import BaselinePolicy
+
+__all__ = ["InchingWave", "InchingPID", "InchingParams", "InchingPIDParams"]
+
+
+@dataclass(frozen=True)
+class InchingParams:
+    """Length-wave gait.
+
+    Attributes:
+        eps: fraction of compression, in (0, 1) (0.3).
+        omega: temporal frequency [rad/s] (2 pi).
+        delta_l: phase offset between neighbouring edges [rad]; None: 2 pi / (N - 1).
+        direction: +1 the wave travels tail to head (moves the worm toward the head), -1 the
+            reverse.
+        l0: uncompressed edge length [m]; None: the env's rest edge length.
+    """
+
+    eps: float = 0.3
+    omega: float = 2 * math.pi
+    delta_l: float | None = None
+    direction: int = 1
+    l0: float | None = None
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.eps < 1:
+            raise ValueError(f"eps = {self.eps!r} must be in [0, 1)")
+        if not self.omega >= 0:
+            raise ValueError(f"omega = {self.omega!r} rad/s must be >= 0")
+        if self.direction not in (1, -1):
+            raise ValueError(f"direction = {self.direction!r} must be +1 or -1")
+        if self.l0 is not None and not self.l0 > 0:
+            raise ValueError(f"l0 = {self.l0!r} m must be > 0")
+
+
+@dataclass(frozen=True)
+class InchingPIDParams(InchingParams):
+    """Length wave plus the proportional gain on the measured edge length.
+
+    Attributes:
+        Kp: gain [1/s] in ``u = lbar_dot_des + Kp (lbar_des - |e|)`` (10).
+    """
+
+    Kp: float = 10.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not self.Kp >= 0:
+            raise ValueError(f"Kp = {self.Kp!r} 1/s must be >= 0")
+
+
+class InchingWave(BaselinePolicy):
+    """Open loop ``u_l = lbar_dot_des`` (MODEL.md §7). State per env: ``[t]``.
+
+    Args:
+        env: SoftWorm env (or a DummyVecEnv of them).
+        eps, omega, delta_l, direction, l0: see :class:`InchingParams`.
+    """
+
+    name = "inching"
+    Params = InchingParams
+    needs = ("edge_lengths",)
+    controls = "edge lengths"
+    suggestion = "use 'open-loop', 'pid' or 'decentralized' on SoftEel-v0"
+
+    def _setup(self) -> None:
+        self.n_outputs = self.layout.n_nodes - 1
+        p = self.params
+        self.delta_l = 2 * math.pi / self.n_outputs if p.delta_l is None else p.delta_l
+        self.l0 = self.layout.edge_length if p.l0 is None else p.l0
+        self.state_size = 1
+
+    def desired(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(lbar_des, lbar_dot_des)`` at times t (n_envs,), each (n_envs, N-1)."""
+        p = self.params
+        out = [length_wave(ti, self.n_outputs, self.l0, p.eps, p.omega, self.delta_l, p.direction)
+               for ti in t]
+        return np.array([o[0] for o in out]), np.array([o[1] for o in out])
+
+    def _control(self, obs, state):
+        t = state[:, 0].copy()
+        lbar_des, lbar_dot_des = self.desired(t)
+        lengths = self.block(obs, "edge_lengths")
+        state[:, 0] = t + self.layout.dt
+        return self._law(lbar_des, lbar_dot_des, lengths), np.abs(lbar_des - lengths)
+
+    def _law(self, lbar_des, lbar_dot_des, lengths):
+        return lbar_dot_des
+
+
+class InchingPID(InchingWave):
+    """Closed loop on the measured edge length,
+    ``u_l,k = lbar_dot_des,k + Kp (lbar_des,k - |e^k|)`` (MODEL.md §7).
+
+    Args:
+        env: SoftWorm env (or a DummyVecEnv of them).
+        eps, omega, delta_l, direction, l0, Kp: see :class:`InchingPIDParams`.
+    """
+
+    name = "inching-pid"
+    Params = InchingPIDParams
+
+    def _law(self, lbar_des, lbar_dot_des, lengths):
+        return lbar_dot_des + self.params.Kp * (lbar_des - lengths)

@@ -1,0 +1,83 @@
+"""Open-loop serpenoid (MODEL.md §7): the rest curvature follows the traveling wave."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from soft_snake_gym.gaits import serpenoid, serpenoid_phase
+from soft_snake_gym.policies.base import BaselinePolicy
+
+__all__ = ["OpenLoopSerpenoid", "SerpenoidParams"]
+
+
+@dataclass(frozen=True)
+class SerpenoidParams:
+    """Serpenoid gait (MODEL.md §6), thesis defaults.
+
+    Attributes:
+        alpha: amplitude of the turning angle [rad] (pi/6).
+        omega: temporal frequency [rad/s] (2 pi / 3).
+        delta: phase offset between neighbouring nodes [rad]; None: 2 pi / (N - 2), one
+            wave along the body (pi/4 for N = 10).
+        gamma: turning bias [rad] (0).
+        psi0: phase of the clock at t = 0 [rad] (0).
+    """
+
+    alpha: float = math.pi / 6
+    omega: float = 2 * math.pi / 3
+    delta: float | None = None
+    gamma: float = 0.0
+    psi0: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.alpha < math.pi:
+            raise ValueError(f"alpha = {self.alpha!r} rad must be in [0, pi)")
+        if not self.omega >= 0:
+            raise ValueError(f"omega = {self.omega!r} rad/s must be >= 0")
+
+
+class _SerpenoidPolicy(BaselinePolicy):
+    """Shared by the bending controllers: a clock in ``state[:, 0]``."""
+
+    Params = SerpenoidParams
+    needs = ("kappa", "kappa_dot")
+    controls = "curvature"
+    suggestion = "use 'inching' or 'inching-pid' on SoftWorm-v0"
+
+    def _setup(self) -> None:
+        self.n_outputs = self.layout.n_nodes - 2
+        p = self.params
+        self.delta = 2 * math.pi / self.n_outputs if p.delta is None else p.delta
+        self.state_size = 1 + self.n_outputs
+
+    def clock_phase(self, t: np.ndarray) -> np.ndarray:
+        """Centralized phases ``omega t + delta j + psi0``, (n_envs, N-2) [rad]."""
+        p = self.params
+        return serpenoid_phase(0.0, self.n_outputs, 0.0, self.delta, p.psi0)[None, :] + (
+            p.omega * t[:, None]
+        )
+
+    def desired(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(kappa_des, kappa_dot_des)`` at phases psi advancing at omega."""
+        p = self.params
+        return serpenoid(psi, p.omega, p.alpha, p.gamma)
+
+
+class OpenLoopSerpenoid(_SerpenoidPolicy):
+    """``u = kappa_dot_des``: the rest curvature follows the serpenoid (MODEL.md §7).
+
+    Args:
+        env: SoftEel env (or a DummyVecEnv of them).
+        alpha, omega, delta, gamma, psi0: see :class:`SerpenoidParams`.
+    """
+
+    name = "open-loop"
+
+    def _control(self, obs, state):
+        t = state[:, 0].copy()
+        kappa_des, kappa_dot_des = self.desired(self.clock_phase(t))
+        state[:, 0] = t + self.layout.dt
+        return kappa_dot_des, np.abs(kappa_des - self.block(obs, "kappa"))
