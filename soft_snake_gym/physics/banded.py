@@ -16,7 +16,7 @@ KU = 5
 WIDTH = 2 * KL + KU + 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def band_lu(J: np.ndarray, piv: np.ndarray, n: int) -> bool:
     """Factor the band matrix in ``J`` in place; returns False if it is singular."""
     for k in range(n):
@@ -47,7 +47,7 @@ def band_lu(J: np.ndarray, piv: np.ndarray, n: int) -> bool:
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def band_solve(J: np.ndarray, piv: np.ndarray, n: int, b: np.ndarray) -> None:
     """Solve ``A x = b`` in place in ``b`` with the factors from :func:`band_lu`."""
     for k in range(n):

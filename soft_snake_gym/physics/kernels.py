@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from soft_snake_gym.physics.banded import KL, band_lu, band_solve
@@ -57,7 +56,7 @@ STATUS_REASONS = (
 )
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _add_block(J, i, j, m00, m01, m10, m11):
     """Add a 2x2 block to the band at node pair (i, j)."""
     r = 2 * i
@@ -68,7 +67,7 @@ def _add_block(J, i, j, m00, m01, m10, m11):
     J[r + 1, c] += m11
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _add_edge_pattern(J, k, s00, s01, s11):
     """Add the pattern [[-S, S], [S, -S]] of a symmetric 2x2 S to nodes (k, k+1)."""
     _add_block(J, k, k, -s00, -s01, -s01, -s11)
@@ -77,7 +76,7 @@ def _add_edge_pattern(J, k, s00, s01, s11):
     _add_block(J, k + 1, k + 1, -s00, -s01, -s01, -s11)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def turning(q, j):
     """Turning quantities at interior node j (MODEL.md §2).
 
@@ -102,14 +101,14 @@ def turning(q, j):
     return kappa, g0x, g0y, -g0x - g2x, -g0y - g2y, g2x, g2y, tax, tay, tbx, tby, la, lb
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def curvatures(q, kappa):
     """Discrete curvature ``kappa_j = 2 tan(phi_j/2)`` of the interior nodes, (N-2,) [-]."""
     for j in range(1, q.size // 2 - 1):
         kappa[j - 1] = turning(q, j)[0]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def curvature_rates(q, v, kdot):
     """Exact curvature rate ``(1 + kappa^2/4)(theta_dot^j - theta_dot^(j-1))``, (N-2,) [1/s]."""
     for j in range(1, q.size // 2 - 1):
@@ -119,14 +118,14 @@ def curvature_rates(q, v, kdot):
         kdot[j - 1] = (1.0 + 0.25 * k * k) * phidot
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def edge_lengths(q, out):
     """Current edge lengths ``|e^k|``, (N-1,) [m]."""
     for k in range(q.size // 2 - 1):
         out[k] = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def edge_length_rates(q, v, out):
     """Rates ``t^k . (v[k+1] - v[k])`` of the edge lengths, (N-1,) [m/s]."""
     for k in range(q.size // 2 - 1):
@@ -136,7 +135,7 @@ def edge_length_rates(q, v, out):
         out[k] = (ex * (v[2 * k + 2] - v[2 * k]) + ey * (v[2 * k + 3] - v[2 * k + 1])) / l
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def elastic_energy(q, kbar, lbar, prm):
     """Stretching plus bending energy ``E_s + E_b`` (MODEL.md §3) [J]."""
     N = q.size // 2
@@ -152,7 +151,7 @@ def elastic_energy(q, kbar, lbar, prm):
     return e
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
     """Add internal (elastic, damping) and, if ``water``, drag forces into F (2N,) [N].
 
@@ -282,7 +281,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
     return power
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def added_mass(q, prm, dv, out, J, coef, apply, jac):
     """Added mass of MODEL.md §4: ``M_A`` puts ``mu_n/4 n n^T`` on the four blocks of each
     edge, ``mu_n = rho pi C_A a^2 l``. If ``apply``, add ``M_A dv`` to ``out``; if ``jac``,
@@ -308,7 +307,7 @@ def added_mass(q, prm, dv, out, J, coef, apply, jac):
                     _add_block(J, a, b, m00, m01, m01, m11)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def solve_mass(q, prm, m, F, a, J, piv, water):
     """Accelerations ``a`` from ``(M + M_A(q)) a = F`` by a banded solve (``M_A = 0`` unless
     ``water``); ``m`` is the node mass per coordinate (2N,)."""
@@ -326,7 +325,7 @@ def solve_mass(q, prm, m, F, a, J, piv, water):
     band_solve(J, piv, n, a)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def actuator_power(q, kbar, lbar, u_k, u_l, prm):
     """Power the inputs put into the body, ``dE/dkbar . u_k + dE/dlbar . u_l`` (MODEL.md §3) [W]."""
     N = q.size // 2
@@ -343,7 +342,7 @@ def actuator_power(q, kbar, lbar, u_k, u_l, prm):
     return p
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _segments_cross(q, a, b):
     """True if edges a and b cross properly (a shared end or a mere touch does not count)."""
     p1x, p1y, p2x, p2y = q[2 * a], q[2 * a + 1], q[2 * a + 2], q[2 * a + 3]
@@ -355,7 +354,7 @@ def _segments_cross(q, a, b):
     return d1 * d2 < 0.0 and d3 * d4 < 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def self_intersects(q, keys, order):
     """Sweep and prune over the edges' x-extents; ``order`` (N-1,) persists between calls, so
     the insertion sort is nearly linear for a body that moves a little each step."""
@@ -382,7 +381,7 @@ def self_intersects(q, keys, order):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def check_state(q, v, lbar, prm, buf, ibuf):
     """Status code of a state: non-finite, runaway stretch, or self-intersection."""
     n = q.size
@@ -399,7 +398,7 @@ def check_state(q, v, lbar, prm, buf, ibuf):
     return OK
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _classify_friction(q, v, kbar, lbar, prm, buf, J, ibuf):
     """Karnopp classification at the start of a step (MODEL.md §5): a slow node whose other
     forces stay within ``mu_s F_N`` sticks; a slow node pushed harder breaks away with a
@@ -431,7 +430,7 @@ def _classify_friction(q, v, kbar, lbar, prm, buf, J, ibuf):
             fbrk[2 * i + 1] = -prm[P_MUD] * fn * F[2 * i + 1] / fo
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
     """Residual ``R = (M + M_A)(v - v0) - dt F(q0 + dt v, v)`` of backward Euler at the trial
     velocity ``v`` (also writes ``q``), and if ``jac`` its Jacobian into J. Returns
@@ -493,7 +492,7 @@ def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
     return norm2, rmax, p_fluid, p_fric
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     """One backward-Euler step by damped Newton on the banded analytic Jacobian (MODEL.md §5a).
     Returns (status, iterations, residual, fluid power, friction power)."""
@@ -546,7 +545,7 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     return OK, it, rmax, p_fluid, p_fric
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     """One explicit semi-implicit (symplectic) Euler step: kick with F(q, v), then drift.
     On the ground, explicit Karnopp friction; a sliding node is stopped, not reversed.
@@ -590,7 +589,7 @@ def _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     return p_fluid, p_fric
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def simulate(q, v, kbar, lbar, u_k, u_l, prm, buf, J, ibuf, out, n_steps):
     """Advance one robot by ``n_steps`` steps of ``h`` with inputs held constant; stops at the
     first failure. Per step: rest shape moves by ``dt u`` each sub-step, the state follows by

@@ -1,0 +1,76 @@
+"""Stick-slip friction on the ground (MODEL.md §5) and the inching length wave (§6)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from soft_snake_gym import Ground, Integrator, SimConfig, Simulator, body_from_curvature
+from soft_snake_gym.gaits import length_wave
+
+G = Ground()
+
+
+def pushed(frac: float, method: str = "backward_euler") -> Simulator:
+    """A straight rod at rest on the ground pushed along +x by frac * mu_s * m_i * g per node."""
+    sim = Simulator(SimConfig(medium="ground", integrator=Integrator(method=method)))
+    force = np.zeros((sim.N, 2))
+    force[:, 0] = frac * G.mu_s * sim.masses * G.g
+    sim.set_external_force(force)
+    return sim
+
+
+@pytest.mark.parametrize("method", ["backward_euler", "symplectic_euler"])
+def test_push_below_static_friction_stays_stuck(method):
+    sim = pushed(0.95, method)
+    x0 = sim.x
+    for _ in range(100):
+        assert sim.step()
+    assert np.array_equal(sim.x, x0)
+    assert sim.stuck.all()
+    assert sim.friction_work == 0.0
+
+
+@pytest.mark.parametrize("method", ["backward_euler", "symplectic_euler"])
+def test_push_above_static_friction_breaks_away_then_decelerates_at_mu_d_g(method):
+    sim = pushed(1.1, method)
+    for _ in range(50):
+        assert sim.step()
+    assert not sim.stuck.any()
+    # accelerates at (1.1 mu_s - mu_d) g while pushed
+    expected = (1.1 * G.mu_s - G.mu_d) * G.g * 0.5
+    assert sim.com_velocity[0] == pytest.approx(expected, rel=1e-3)
+    sim.set_external_force(None)
+    v0 = sim.com_velocity[0]
+    for _ in range(10):
+        assert sim.step()
+    decel = (v0 - sim.com_velocity[0]) / 0.1
+    assert decel == pytest.approx(G.mu_d * G.g, rel=1e-3)
+    # kinetic energy goes into friction work, then the rod stops and sticks again
+    for _ in range(100):
+        assert sim.step()
+    assert np.abs(sim.v).max() == 0.0 and sim.stuck.all()
+    assert sim.friction_work > 0
+
+
+def inch(direction: int, cycles: int = 4, eps: float = 0.2, omega: float = np.pi,
+         delta_l: float = 2 * np.pi / 9) -> tuple[float, Simulator]:
+    sim = Simulator(SimConfig(medium="ground"))
+    N, l0, h = sim.N, 0.18, sim.h
+    lbar0, _ = length_wave(0.0, N - 1, l0, eps, omega, delta_l, direction)
+    sim.reset(x=body_from_curvature(np.zeros(N - 2), lbar0), lbar=lbar0)
+    c0 = sim.com
+    for n in range(round(cycles * 2 * np.pi / omega / h)):
+        _, ldot = length_wave((n + 0.5) * h, N - 1, l0, eps, omega, delta_l, direction)
+        assert sim.step(u_l=ldot), sim.failure
+    return (sim.com - c0)[0] / cycles, sim
+
+
+def test_traveling_length_wave_moves_the_worm_with_the_wave():
+    forward, sim = inch(+1)
+    backward, _ = inch(-1)
+    # a compression wave from tail to head moves the worm toward its head (+x), and back
+    assert forward > 2e-3  # metres per cycle
+    assert backward < -2e-3
+    assert abs(sim.com[1]) < 1e-9  # a straight worm stays on its line
+    assert sim.friction_work > 0 and sim.actuator_energy > 0

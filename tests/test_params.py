@@ -1,0 +1,85 @@
+"""Parameters reject impossible values; YAML maps one to one onto them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from soft_snake_gym import Fluid, Ground, Integrator, Rod, SimConfig
+from soft_snake_gym.config import ConfigError, from_dict, load_sim_config, load_yaml
+
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+
+
+@pytest.mark.parametrize(
+    "make,field,value",
+    [
+        (lambda: Rod(N=2), "Rod.N", "2"),
+        (lambda: Rod(N=10.5), "Rod.N", "10.5"),
+        (lambda: Rod(edge_mass=-0.8), "Rod.edge_mass", "-0.8"),
+        (lambda: Rod(edge_length=0.0), "Rod.edge_length", "0.0"),
+        (lambda: Rod(a=float("nan")), "Rod.a", "nan"),
+        (lambda: Rod(E_bend=-1.0), "Rod.E_bend", "-1.0"),
+        (lambda: Rod(damping=-0.1), "Rod.damping", "-0.1"),
+        (lambda: Fluid(rho=-1.0), "Fluid.rho", "-1.0"),
+        (lambda: Ground(mu_s=0.5, mu_d=0.8), "Ground.mu_d", "0.8"),
+        (lambda: Ground(V_tol=0.0), "Ground.V_tol", "0.0"),
+        (lambda: Integrator(h=0.0), "Integrator.h", "0.0"),
+        (lambda: Integrator(method="rk4"), "Integrator.method", "rk4"),
+        (lambda: Integrator(substeps=0), "Integrator.substeps", "0"),
+        (lambda: SimConfig(medium="lava"), "SimConfig.medium", "lava"),
+    ],
+)
+def test_impossible_parameters_name_field_value_and_range(make, field, value):
+    with pytest.raises(ValueError) as err:
+        make()
+    msg = str(err.value)
+    assert field in msg and value in msg
+    assert any(w in msg for w in ("range", "must", "use", "allowed"))
+
+
+def test_derived_stiffnesses_follow_model_md():
+    rod = Rod()
+    assert rod.EA == pytest.approx(1.875e6 * np.pi * 0.055 * 0.05)
+    assert rod.EI == pytest.approx(1.875e6 * np.pi * 0.055 * 0.05**3 / 4)
+    soft = Rod(E_bend=1.87e4)
+    assert soft.EA == rod.EA and soft.EI == pytest.approx(rod.EI * 1.87e4 / 1.875e6)
+
+
+def test_default_yaml_files_are_exactly_the_dataclass_defaults():
+    assert load_sim_config(CONFIGS / "eel.yaml") == SimConfig()
+    assert load_sim_config(CONFIGS / "worm.yaml") == SimConfig(medium="ground")
+
+
+def test_unknown_key_is_rejected_with_a_suggestion(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("rod:\n  edge_mas: 0.8\n")
+    with pytest.raises(ConfigError, match=r"unknown key 'edge_mas' in bad.yaml.rod; did you mean 'edge_mass'"):
+        load_sim_config(path)
+
+
+def test_malformed_yaml_names_the_line(tmp_path):
+    path = tmp_path / "broken.yaml"
+    path.write_text("rod:\n  N: 10\n  a: [0.05\n")
+    with pytest.raises(ConfigError, match=r"broken.yaml.*not valid YAML at line \d+"):
+        load_yaml(path)
+
+
+def test_missing_file_and_wrong_types_are_explained(tmp_path):
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_yaml(tmp_path / "nope.yaml")
+    with pytest.raises(ConfigError, match=r"Rod.N = 'ten' must be an integer"):
+        from_dict(Rod, {"N": "ten"})
+    with pytest.raises(ConfigError, match=r"Rod.edge_mass = -1.0 is outside the allowed range"):
+        from_dict(Rod, {"edge_mass": -1})
+    with pytest.raises(ConfigError, match="must be a mapping"):
+        from_dict(SimConfig, {"rod": [1, 2]})
+
+
+def test_scientific_notation_without_a_dot_reads_as_a_float(tmp_path):
+    path = tmp_path / "soft.yaml"
+    path.write_text("rod:\n  E_bend: 1.87e4\n  E: 2e6\n")
+    cfg = load_sim_config(path)
+    assert cfg.rod.E_bend == 1.87e4 and cfg.rod.E == 2e6
