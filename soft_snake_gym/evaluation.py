@@ -1,0 +1,245 @@
+"""The one metrics module: run episodes of any policy through SB3's ``evaluate_policy`` and
+collect per-episode metrics (MODEL.md §8).
+
+Per episode:
+
+- ``return``: the sum of rewards; ``steps``; ``duration`` [s];
+- ``average_speed`` [m/s]: centre-of-mass progress along the goal per time, over the window
+  after ``transient`` seconds (the whole episode if it is shorter than twice that);
+- ``distance`` [m]: progress along the goal over the whole episode;
+- ``tracking_error``: mean over the same window and over nodes of ``|desired - measured|``,
+  curvature [-] on the eel, edge length [m] on the worm; only for the baseline policies
+  (NaN for a trained model, which has no reference);
+- ``mean_fluid_power`` [W] / ``energy_fluid`` [J] in water, ``energy_friction`` [J] on land;
+- ``energy_actuator`` [J] and ``cost_of_transport`` [-] (the env's, MODEL.md §8);
+- ``failure``: the env's failure reason, or "".
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["EpisodeRecorder", "evaluate", "make_eval_env", "summarize", "format_table", "COLUMNS"]
+
+#: (key, label, unit) of the summary table, in order; rows whose key is absent are skipped.
+COLUMNS = [
+    ("return", "return", "-"),
+    ("average_speed", "average speed", "m/s"),
+    ("distance", "distance", "m"),
+    ("curvature_error", "curvature error", "-"),
+    ("length_error", "length error", "m"),
+    ("mean_fluid_power", "fluid power", "W"),
+    ("energy_fluid", "fluid energy", "J"),
+    ("energy_friction", "friction energy", "J"),
+    ("energy_actuator", "actuator energy", "J"),
+    ("cost_of_transport", "cost of transport", "-"),
+]
+
+
+def make_eval_env(env_id: str, n_envs: int = 1, seed: int | None = 0,
+                  env_kwargs: dict[str, Any] | None = None, render_mode: str | None = None):
+    """A ``DummyVecEnv`` of ``Monitor``-wrapped envs, as SB3's evaluation expects."""
+    import gymnasium as gym
+    from stable_baselines3.common.monitor import Monitor
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from soft_snake_gym.envs import register_envs
+
+    register_envs()  # what ``import soft_snake_gym`` does; harmless to repeat
+
+    kwargs = dict(env_kwargs or {})
+    if render_mode is not None:
+        kwargs["render_mode"] = render_mode
+
+    def factory(rank: int):
+        def make():
+            env = Monitor(gym.make(env_id, **kwargs))
+            env.reset(seed=None if seed is None else seed + rank)
+            return env
+        return make
+
+    venv = DummyVecEnv([factory(i) for i in range(n_envs)])
+    if seed is not None:
+        venv.seed(seed)
+    return venv
+
+
+@dataclass
+class _Running:
+    steps: int = 0
+    window_steps: int = 0
+    speed_sum: float = 0.0
+    error_sum: float = 0.0
+    error_n: int = 0
+    ret: float = 0.0
+    all_speed_sum: float = 0.0
+    all_error_sum: float = 0.0
+    all_error_n: int = 0
+
+
+class EpisodeRecorder:
+    """An ``evaluate_policy`` callback that turns each env's steps into episode metrics.
+
+    Args:
+        dt: control step [s].
+        transient: start-up time left out of speed and tracking error [s].
+        error_key: ``"curvature_error"`` or ``"length_error"``.
+        on_step: optional ``f(i, info)`` called on every step (for video frames).
+    """
+
+    def __init__(self, dt: float, transient: float, error_key: str,
+                 on_step: Callable[[int, dict], None] | None = None) -> None:
+        self.dt, self.transient, self.error_key = dt, transient, error_key
+        self.on_step = on_step
+        self.episodes: list[dict[str, Any]] = []
+        self._run: dict[int, _Running] = {}
+
+    def __call__(self, locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
+        i, info, done = locals_["i"], locals_["info"], bool(locals_["done"])
+        policy = locals_["model"]
+        run = self._run.setdefault(i, _Running())
+        run.steps += 1
+        run.ret += float(locals_["reward"])
+        err = getattr(policy, "last_error", None)
+        e = float(np.mean(err[i])) if err is not None else math.nan
+        speed = float(info.get("forward_speed", 0.0))
+        run.all_speed_sum += speed
+        if err is not None:
+            run.all_error_sum += e
+            run.all_error_n += 1
+        if run.steps * self.dt > self.transient + 1e-9:
+            run.window_steps += 1
+            run.speed_sum += speed
+            if err is not None:
+                run.error_sum += e
+                run.error_n += 1
+        if self.on_step is not None:
+            self.on_step(i, info)
+        if done:
+            self.episodes.append(self._finish(run, info))
+            self._run[i] = _Running()
+
+    def _finish(self, run: _Running, info: dict[str, Any]) -> dict[str, Any]:
+        m = dict(info.get("metrics", {}))
+        duration = run.steps * self.dt
+        use_window = run.window_steps > 0 and duration >= 2 * self.transient
+        if use_window:
+            speed = run.speed_sum / run.window_steps
+            error = run.error_sum / run.error_n if run.error_n else math.nan
+        else:
+            speed = run.all_speed_sum / run.steps
+            error = run.all_error_sum / run.all_error_n if run.all_error_n else math.nan
+        out: dict[str, Any] = {
+            "return": run.ret,
+            "steps": run.steps,
+            "duration": duration,
+            "average_speed": speed,
+            "distance": float(m.get("distance", math.nan)),
+            self.error_key: error,
+            "energy_actuator": float(m.get("energy_actuator", math.nan)),
+            "cost_of_transport": float(m.get("cost_of_transport", math.nan)),
+            "failure": info.get("failure") or "",
+        }
+        if "energy_fluid" in m:
+            out["energy_fluid"] = float(m["energy_fluid"])
+            out["mean_fluid_power"] = float(m["energy_fluid"]) / duration if duration > 0 else math.nan
+        if "energy_friction" in m:
+            out["energy_friction"] = float(m["energy_friction"])
+        return out
+
+
+def evaluate(policy: Any, env, episodes: int = 3, transient: float = 2.0,
+             deterministic: bool = True, video: str | Path | None = None) -> list[dict[str, Any]]:
+    """Run ``episodes`` episodes of ``policy`` on the VecEnv ``env`` (see
+    :func:`make_eval_env`) with SB3's ``evaluate_policy``; returns one metrics dict per episode.
+
+    Args:
+        policy: anything with SB3's ``predict`` (a baseline or a trained model).
+        env: a ``DummyVecEnv`` of Monitor-wrapped soft_snake_gym envs.
+        episodes: number of episodes.
+        transient: start-up time excluded from speed and tracking error [s].
+        deterministic: passed to ``predict``.
+        video: if given, the first episode of env 0 is written there (``.mp4`` or ``.gif``);
+            the env must have been made with ``render_mode="rgb_array"``.
+    """
+    from stable_baselines3.common.evaluation import evaluate_policy
+
+    inner = env.envs[0].unwrapped
+    error_key = "curvature_error" if inner.medium == "water" else "length_error"
+    frames: list[np.ndarray] = []
+    recording = {"on": video is not None}
+
+    def on_step(i: int, info: dict) -> None:
+        if recording["on"] and i == 0:
+            if "terminal_observation" in info:  # the env has already been reset
+                recording["on"] = False
+                return
+            frame = env.envs[0].render()
+            if frame is not None:
+                frames.append(frame)
+
+    rec = EpisodeRecorder(inner.dt, transient, error_key, on_step if video is not None else None)
+    if video is not None:
+        env.reset()
+        frames.append(env.envs[0].render())
+    evaluate_policy(policy, env, n_eval_episodes=episodes, deterministic=deterministic,
+                    callback=rec, return_episode_rewards=True, warn=False)
+    if video is not None:
+        write_video(frames, video, fps=min(50, int(round(1.0 / inner.dt))), stride=max(1, int(round(0.02 / inner.dt))))
+    return rec.episodes
+
+
+def write_video(frames: list[np.ndarray], path: str | Path, fps: int = 50, stride: int = 1) -> Path:
+    """Write RGB frames (H, W, 3) to ``.mp4`` (imageio-ffmpeg) or ``.gif`` (Pillow)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    frames = [f for f in frames[::stride] if f is not None]
+    if not frames:
+        raise ValueError("no frames were rendered; the env must be made with render_mode='rgb_array'")
+    if path.suffix.lower() == ".gif":
+        from PIL import Image
+
+        images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
+        images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
+        return path
+    try:
+        import imageio.v2 as imageio
+    except ImportError as err:
+        raise RuntimeError(
+            f"writing {path.name} needs imageio with ffmpeg (pip install 'soft-snake-gym[video]'); "
+            "or give a .gif path"
+        ) from err
+    imageio.mimsave(path, [np.asarray(f, dtype=np.uint8) for f in frames], fps=fps)
+    return path
+
+
+def summarize(episodes: list[dict[str, Any]]) -> dict[str, tuple[float, float]]:
+    """Mean and standard deviation of every numeric metric over episodes."""
+    keys = [k for k in episodes[0] if isinstance(episodes[0][k], (int, float))]
+    out = {}
+    for k in keys:
+        vals = np.array([float(e[k]) for e in episodes])
+        finite = vals[np.isfinite(vals)]
+        out[k] = (float(finite.mean()), float(finite.std())) if finite.size else (math.nan, math.nan)
+    return out
+
+
+def format_table(summary: dict[str, tuple[float, float]], title: str = "") -> str:
+    """A plain-text table: metric, unit, mean ± std."""
+    rows = [(label, unit, summary[key]) for key, label, unit in COLUMNS if key in summary]
+    width = max(len(r[0]) for r in rows)
+    lines = [title] if title else []
+    lines.append(f"{'metric':<{width}}  {'unit':<4}  {'mean':>11} ± {'std':<10}")
+    lines.append("-" * (width + 32))
+    for label, unit, (mean, std) in rows:
+        if math.isnan(mean):
+            lines.append(f"{label:<{width}}  {unit:<4}  {'n/a':>11}")
+        else:
+            lines.append(f"{label:<{width}}  {unit:<4}  {mean:>11.4g} ± {std:<10.3g}")
+    return "\n".join(lines)
