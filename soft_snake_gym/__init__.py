@@ -3,17 +3,22 @@ numba-compiled planar discrete elastic rod, with Gymnasium environments on top."
 
 from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig
 from soft_snake_gym.physics import Simulator, SimulationError, body_from_curvature
+from soft_snake_gym.envs import InchEnv, SwimEnv, register_envs
+
+register_envs()  # SoftEel-v0, SoftWorm-v0; gym.make("soft_snake_gym:SoftEel-v0") relies on it
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Fluid",
     "Ground",
+    "InchEnv",
     "Integrator",
     "Rod",
     "SimConfig",
     "Simulator",
     "SimulationError",
+    "SwimEnv",
     "body_from_curvature",
     "__version__",
 ]

@@ -1,0 +1,21 @@
+"""Gymnasium environments: ``SoftEel-v0`` (:class:`SwimEnv`) and ``SoftWorm-v0`` (:class:`InchEnv`).
+
+Importing ``soft_snake_gym`` registers both ids, so ``gym.make("SoftEel-v0")`` works after
+``import soft_snake_gym`` and ``gym.make("soft_snake_gym:SoftEel-v0")`` works without it.
+"""
+
+from soft_snake_gym.envs.base import Randomization, SoftRobotEnv
+from soft_snake_gym.envs.inch import InchEnv, InchSettings
+from soft_snake_gym.envs.registration import ENV_IDS, register_envs
+from soft_snake_gym.envs.swim import SwimEnv, SwimSettings
+
+__all__ = [
+    "ENV_IDS",
+    "InchEnv",
+    "InchSettings",
+    "Randomization",
+    "SoftRobotEnv",
+    "SwimEnv",
+    "SwimSettings",
+    "register_envs",
+]

@@ -1,0 +1,243 @@
+"""``SoftWorm-v0``: the same robot on the ground, inching by moving its rest lengths."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from gymnasium.spaces import Box
+
+from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number, clip_rates
+
+__all__ = ["InchEnv", "InchSettings", "inch_observation"]
+
+
+def inch_observation(
+    edge_lengths: np.ndarray,
+    edge_length_rates: np.ndarray,
+    lbar: np.ndarray,
+    stuck: np.ndarray,
+    com_velocity: np.ndarray,
+    heading: float,
+    out: np.ndarray,
+) -> np.ndarray:
+    """The ``SoftWorm-v0`` observation (unclipped, float64) written into ``out``.
+
+    Layout: edge_lengths (N-1), edge_length_rates (N-1), lbar (N-1), stuck (N, 0/1),
+    com_velocity_body (2: along the heading, lateral).
+    """
+    m = edge_lengths.size
+    out[:m] = edge_lengths
+    out[m : 2 * m] = edge_length_rates
+    out[2 * m : 3 * m] = lbar
+    out[3 * m : 4 * m + 1] = stuck
+    c, s = math.cos(heading), math.sin(heading)  # body_frame() for one robot, without arrays
+    vx, vy = com_velocity
+    out[4 * m + 1] = c * vx + s * vy
+    out[4 * m + 2] = c * vy - s * vx
+    return out
+
+
+@dataclass(frozen=True)
+class InchSettings(BaseSettings):
+    """Constructor keywords of :class:`InchEnv` (the table in its docstring)."""
+
+    forward_reward_weight: float = 10.0
+    energy_cost_weight: float = 1e-3
+    ctrl_cost_weight: float = 1e-3
+    max_length_rate: float = 0.3
+    rest_length_limits: tuple[float, float] = (0.5, 1.5)
+    energy_source: Literal["friction", "actuator"] = "friction"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check_number("InchSettings", "max_length_rate", self.max_length_rate, 0.0, lo_open=True)
+        lim = tuple(self.rest_length_limits)
+        object.__setattr__(self, "rest_length_limits", lim)
+        if len(lim) != 2 or not (0.0 < lim[0] <= 1.0 <= lim[1]):
+            raise ValueError(
+                f"InchSettings.rest_length_limits = {list(lim)!r} must be [low, high] fractions of the "
+                "edge length with 0 < low <= 1 <= high"
+            )
+        if self.energy_source not in ("friction", "actuator"):
+            raise ValueError(
+                f"InchSettings.energy_source = {self.energy_source!r}; use 'friction' or 'actuator'"
+            )
+
+
+class InchEnv(SoftRobotEnv):
+    r"""A soft worm that inches on the ground by stretching: ``SoftWorm-v0``.
+
+    ## Description
+    The same planar discrete elastic rod as ``SoftEel-v0`` (N = 10 nodes, 9 edges of 0.18 m,
+    0.8 kg each) lying on a flat floor with Karnopp stick-slip friction (``mu_s = 1.15``,
+    ``mu_d = 0.8``; MODEL.md §5), its rest shape straight. The agent moves the rest lengths
+    ``lbar`` of the 9 edges; a compression wave travelling from tail to head
+    (``soft_snake_gym.gaits.length_wave``, eps = 0.3, omega = 2 pi) inches forward at about
+    8 mm/s. The task is to move along the goal direction (+x by default, the head ahead).
+
+    ## Action Space
+    A `Box(-1, 1, (N-1,), float32)`: the length rates ``u_l = max_length_rate * action`` [m/s]
+    of the edges, held over the control step (``d lbar/dt = u_l``). Actions outside [-1, 1]
+    are clipped; a NaN or a wrong shape raises ``ValueError``. A rate that would carry
+    ``lbar`` outside ``rest_length_limits`` (fractions of the edge length) is cut so that
+    ``lbar`` stops at the bound. The default ``max_length_rate = 0.3`` m/s covers the inching
+    wave's peak rate ``0.5 l0 eps omega = 0.17`` m/s at eps = 0.3, omega = 2 pi, with room
+    for feedback.
+
+    ## Observation Space
+    A `Box(low, high, (4N-1,), float32)` in this order (``observation_structure``); values
+    beyond the bounds are clipped (``l0`` = edge length, ``[lo, hi]`` = ``rest_length_limits``):
+
+    | Block              | Size | Bounds                   | Meaning (unit)                                            |
+    |--------------------|------|--------------------------|-----------------------------------------------------------|
+    | edge_lengths       | N-1  | [0, 2 hi l0]             | current edge lengths (m)                                  |
+    | edge_length_rates  | N-1  | ±10 max_length_rate      | their rates (m/s)                                         |
+    | lbar               | N-1  | [lo l0, hi l0]           | rest lengths (m)                                          |
+    | stuck              | N    | {0, 1}                   | 1 where the node stuck to the ground in the last step     |
+    | com_velocity_body  | 2    | ±max_observed_speed      | centre-of-mass velocity along the heading, lateral (m/s)  |
+
+    ## Rewards
+    ``reward = reward_forward + reward_energy + reward_ctrl + reward_failure``, each in ``info``:
+
+    - *reward_forward* = ``forward_reward_weight * forward_speed``: centre-of-mass
+      displacement along the goal direction over the step, divided by ``dt`` (m/s).
+    - *reward_energy* = ``-energy_cost_weight * P``: with ``energy_source="friction"`` (default)
+      ``P`` is the power lost to friction (the land energy metric of MODEL.md §5), with
+      ``"actuator"`` the absolute actuator power (MODEL.md §3), averaged over the step (W).
+    - *reward_ctrl* = ``-ctrl_cost_weight * ||action||^2`` (normalized action).
+    - *reward_failure* = ``-failure_cost`` on the step that ends the episode by a failure.
+
+    ## Starting State
+    A straight body along +x (head ahead, whatever ``goal_direction``), bent by curvatures
+    drawn from U(-s, s) at each interior node and turned by U(-s, s) rad, with rest lengths ``l0 (1 + U(-s, s))`` that the
+    body matches (``s = reset_noise_scale``), rest shape straight, at rest, centre of mass at
+    the origin. ``reset(options={"x", "v", "kbar", "lbar"})`` sets the initial body exactly;
+    ``options={"goal_direction": angle}`` sets the episode's goal. With ``randomize``, the
+    physics is drawn anew at each reset, the values in ``info["randomized"]``.
+
+    ## Episode End
+    ### Termination
+    A failed physics step (non-finite state, self-intersection, runaway stretch, a Newton step
+    that does not converge); ``info["failure"]`` names the reason.
+    ### Truncation
+    1000 steps (10 s at the default ``dt``), by ``TimeLimit`` through ``gym.make``.
+
+    ## Info
+    Every step: ``forward_speed`` (m/s), ``x_position``, ``y_position``, ``heading``, ``time``,
+    ``friction_power``, ``actuator_power`` (signed; W), ``edge_lengths``, ``lbar``, ``stuck``,
+    ``newton_iterations``, every ``reward_<term>``, ``failure`` and ``metrics`` (running episode
+    summary: ``average_speed``, ``distance``, ``displacement``, ``duration``,
+    ``cost_of_transport``, ``energy_friction``, ``energy_actuator``, ``actuator_work``).
+
+    ## Arguments
+    ```python
+    env = gym.make("SoftWorm-v0", max_length_rate=0.4, ground={"mu_s": 0.9, "mu_d": 0.6})
+    env = gym.make("SoftWorm-v0", config="configs/softworm.yaml")
+    ```
+
+    | Parameter             | Type              | Default        | Description                                                                 |
+    |-----------------------|-------------------|----------------|-----------------------------------------------------------------------------|
+    | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: ground` key is accepted)        |
+    | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
+    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9)                                                      |
+    | `fluid`               | dict or `Fluid`   | `Fluid()`      | unused on the ground                                                        |
+    | `ground`              | dict or `Ground`  | `Ground()`     | friction: mu_s, mu_d, V_tol, g                                              |
+    | `integrator`          | dict or `Integrator` | `Integrator()` | backward Euler at h = 0.01 s by default                                  |
+    | `dt`                  | float or None     | `None`         | control step (s), a multiple of `integrator.h`; `None`: `integrator.h`      |
+    | `max_length_rate`     | float             | `0.3`          | length rate (m/s) of action 1.0                                             |
+    | `rest_length_limits`  | [float, float]    | `[0.5, 1.5]`   | bounds of `lbar` as fractions of the edge length                            |
+    | `energy_source`       | str               | `"friction"`   | `"friction"` or `"actuator"`: the power charged by *reward_energy*          |
+    | `forward_reward_weight` | float           | `10.0`         | weight of *reward_forward* (per m/s)                                        |
+    | `energy_cost_weight`  | float             | `1e-3`         | weight of *reward_energy* (per W)                                           |
+    | `ctrl_cost_weight`    | float             | `1e-3`         | weight of *reward_ctrl*                                                     |
+    | `failure_cost`        | float             | `10.0`         | penalty on a failure                                                        |
+    | `reset_noise_scale`   | float             | `0.01`         | `s` of the Starting State                                                   |
+    | `goal_direction`      | float             | `0.0`          | goal direction (rad from +x)                                                |
+    | `max_observed_speed`  | float             | `2.0`          | bound of `com_velocity_body` (m/s)                                          |
+    | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping, rho, C_f, C_D, C_A, mu_s, mu_d |
+
+    ## Version History
+    * v0: initial version, on the PDER simulator of ``soft_snake_gym.physics``.
+    """
+
+    medium = "ground"
+    settings_class = InchSettings
+    env_id = "SoftWorm-v0"
+    medium_energy_key = "energy_friction"
+
+    def __init__(self, render_mode: str | None = None, config: Any = None, **kwargs: Any):
+        super().__init__(render_mode=render_mode, config=config, **kwargs)
+        s = self.settings
+        self.max_length_rate = float(s.max_length_rate)
+        l0 = self.base_config.rod.edge_length
+        self.lbar_limits = (s.rest_length_limits[0] * l0, s.rest_length_limits[1] * l0)
+
+    def _build_spaces(self) -> None:
+        s = self.settings
+        m = self.N - 1
+        l0 = self.base_config.rod.edge_length
+        lo, hi = s.rest_length_limits[0] * l0, s.rest_length_limits[1] * l0
+        self.observation_structure = {
+            "edge_lengths": m, "edge_length_rates": m, "lbar": m, "stuck": self.N, "com_velocity_body": 2,
+        }
+        low = np.concatenate([
+            np.zeros(m), np.full(m, -10.0 * s.max_length_rate), np.full(m, lo), np.zeros(self.N),
+            np.full(2, -s.max_observed_speed),
+        ]).astype(np.float32)
+        high = np.concatenate([
+            np.full(m, 2.0 * hi), np.full(m, 10.0 * s.max_length_rate), np.full(m, hi), np.ones(self.N),
+            np.full(2, s.max_observed_speed),
+        ]).astype(np.float32)
+        self.observation_space = Box(low, high, dtype=np.float32)
+        self.action_space = Box(-1.0, 1.0, (m,), dtype=np.float32)
+
+    def _set_inputs(self, action: np.ndarray) -> None:
+        np.multiply(action, self.max_length_rate, out=self._ul)
+        clip_rates(self._ul, self.sim._lbar, self.lbar_limits[0], self.lbar_limits[1], self.dt)
+
+    def _observe(self, out: np.ndarray) -> None:
+        sim = self.sim
+        self._lengths, self._stuck = sim.edge_lengths, sim.stuck
+        inch_observation(self._lengths, sim.edge_length_rates, sim._lbar, self._stuck,
+                         self._com_of(sim._v), sim.heading, out)
+
+    def _energy_power(self, d_actuator_energy: float, d_medium_energy: float) -> float:
+        if self.settings.energy_source == "friction":
+            return d_medium_energy / self.dt
+        return d_actuator_energy / self.dt
+
+    def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        body = self._noisy_straight_body(
+            rng, np.zeros(self.N - 2), np.full(self.N - 1, self.base_config.rod.edge_length),
+            length_noise=True,
+        )
+        np.clip(body["lbar"], *self.lbar_limits, out=body["lbar"])
+        return body
+
+    def _check_options(self, body: dict[str, np.ndarray]) -> None:
+        lbar = body.get("lbar")
+        lo, hi = self.lbar_limits
+        if lbar is not None and lbar.shape == (self.N - 1,) and (lbar.min() < lo or lbar.max() > hi):
+            raise ValueError(
+                f"reset option lbar spans [{lbar.min():.4g}, {lbar.max():.4g}] m, outside "
+                f"rest_length_limits [{lo:.4g}, {hi:.4g}] m; keep it within those bounds"
+            )
+
+    def _state_info(self) -> dict[str, Any]:
+        sim = self.sim
+        com = self._com
+        return {
+            "x_position": float(com[0]),
+            "y_position": float(com[1]),
+            "heading": sim.heading,
+            "time": sim.time,
+            "friction_power": self._power_medium,
+            "actuator_power": self._power_actuator,
+            "edge_lengths": self._lengths,
+            "lbar": sim.lbar,
+            "stuck": self._stuck,
+            "newton_iterations": sim.newton_iterations,
+        }

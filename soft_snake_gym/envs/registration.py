@@ -1,0 +1,24 @@
+"""Registration of the environment ids with Gymnasium (done on ``import soft_snake_gym``).
+
+Gymnasium 1.x has no plugin entry points: ``gym.make("soft_snake_gym:SoftEel-v0")`` imports
+``soft_snake_gym``, whose import calls :func:`register_envs`. Calling it again is harmless.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+__all__ = ["ENV_IDS", "MAX_EPISODE_STEPS", "register_envs"]
+
+MAX_EPISODE_STEPS = 1000
+ENV_IDS = {
+    "SoftEel-v0": "soft_snake_gym.envs.swim:SwimEnv",
+    "SoftWorm-v0": "soft_snake_gym.envs.inch:InchEnv",
+}
+
+
+def register_envs() -> None:
+    """Register ``SoftEel-v0`` and ``SoftWorm-v0`` (1000 steps each) unless already registered."""
+    for env_id, entry_point in ENV_IDS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point=entry_point, max_episode_steps=MAX_EPISODE_STEPS)

@@ -1,0 +1,261 @@
+"""``SoftEel-v0``: the thesis eel swimming in water by moving its rest curvatures."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from gymnasium.spaces import Box
+
+from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number, clip_rates
+from soft_snake_gym.gaits import serpenoid, serpenoid_phase
+
+__all__ = ["SwimEnv", "SwimSettings", "swim_observation"]
+
+
+def swim_observation(
+    kappa: np.ndarray,
+    kappa_dot: np.ndarray,
+    kbar: np.ndarray,
+    com_velocity: np.ndarray,
+    heading: float,
+    goal_direction: float,
+    out: np.ndarray,
+) -> np.ndarray:
+    """The ``SoftEel-v0`` observation (unclipped, float64) written into ``out``.
+
+    Layout: kappa (N-2), kappa_dot (N-2), kbar (N-2), com_velocity_body (2: along the heading,
+    lateral), goal_direction_body (2: cos and sin of the goal direction minus the heading).
+    """
+    n = kappa.size
+    out[:n] = kappa
+    out[n : 2 * n] = kappa_dot
+    out[2 * n : 3 * n] = kbar
+    c, s = math.cos(heading), math.sin(heading)  # body_frame() for one robot, without arrays
+    vx, vy = com_velocity
+    out[3 * n] = c * vx + s * vy
+    out[3 * n + 1] = c * vy - s * vx
+    rel = goal_direction - heading
+    out[3 * n + 2] = math.cos(rel)
+    out[3 * n + 3] = math.sin(rel)
+    return out
+
+
+@dataclass(frozen=True)
+class SwimSettings(BaseSettings):
+    """Constructor keywords of :class:`SwimEnv` (the table in its docstring)."""
+
+    max_curvature_rate: float = 2.0 * math.pi
+    max_rest_curvature: float = 4.0
+    initial_shape: Literal["straight", "serpenoid"] = "straight"
+    serpenoid_alpha: float = math.pi / 4
+    serpenoid_delta: float | None = None
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("max_curvature_rate", "max_rest_curvature"):
+            _check_number("SwimSettings", name, getattr(self, name), 0.0, lo_open=True)
+        _check_number("SwimSettings", "serpenoid_alpha", self.serpenoid_alpha, 0.0)
+        if self.serpenoid_alpha >= math.pi:
+            raise ValueError(f"SwimSettings.serpenoid_alpha = {self.serpenoid_alpha!r} must be in [0, pi)")
+        if self.serpenoid_delta is not None:
+            _check_number("SwimSettings", "serpenoid_delta", self.serpenoid_delta)
+        if self.initial_shape not in ("straight", "serpenoid"):
+            raise ValueError(
+                f"SwimSettings.initial_shape = {self.initial_shape!r}; use 'straight' or 'serpenoid'"
+            )
+
+
+class SwimEnv(SoftRobotEnv):
+    r"""A soft eel that swims by bending: ``SoftEel-v0``.
+
+    ## Description
+    The robot of Jaya Prakash's thesis (2020) and Scott, Jaya Prakash & Paley (2021): a planar
+    discrete elastic rod of N = 10 nodes (9 edges of 0.18 m and 0.8 kg, 1.62 m and 7.2 kg in
+    all) in still water, with Morison-type drag and added mass (see ``MODEL.md``). The agent
+    moves the rest curvature ``kbar`` of the 8 interior nodes; the body follows through its
+    elasticity and the water pushes back. The task is to swim along a goal direction (+x by
+    default; the body starts along +x with its head, node N-1, ahead). A serpenoid travelling
+    wave from head to tail (``soft_snake_gym.gaits.serpenoid``) swims at about 0.2 m/s.
+
+    ## Action Space
+    A `Box(-1, 1, (N-2,), float32)`: the curvature rates ``u_k = max_curvature_rate * action``
+    [1/s] of the interior nodes 1 … N-2, held over the control step (``d kbar/dt = u_k``).
+    Actions outside [-1, 1] are clipped; a NaN or a wrong shape raises ``ValueError``. A rate
+    that would carry ``kbar`` past ``±max_rest_curvature`` is cut so that ``kbar`` stops at the
+    bound. The default ``max_curvature_rate = 2 pi`` 1/s covers the PID baseline's saturation
+    ``1.5 alpha omega`` for every gait with ``alpha omega <= 4.19`` (e.g. alpha = pi/4 up to
+    omega = 5.3 rad/s).
+
+    ## Observation Space
+    A `Box(low, high, (3(N-2)+4,), float32)`, what the robot's own sensors measure, in this order
+    (``env.unwrapped.observation_structure``); values beyond the bounds are clipped:
+
+    | Block               | Size | Bounds                        | Meaning (unit)                                          |
+    |---------------------|------|-------------------------------|---------------------------------------------------------|
+    | kappa               | N-2  | ±2 max_rest_curvature         | curvature ``2 tan(phi/2)`` of the interior nodes (-)    |
+    | kappa_dot           | N-2  | ±4 max_curvature_rate         | exact curvature rates, MODEL.md §2 (1/s)                |
+    | kbar                | N-2  | ±max_rest_curvature           | rest curvatures (-)                                     |
+    | com_velocity_body   | 2    | ±max_observed_speed           | centre-of-mass velocity along the heading, lateral (m/s)|
+    | goal_direction_body | 2    | ±1                            | cos, sin of (goal direction − heading)                  |
+
+    The heading is the direction of the tail-to-head chord ``x[N-1] - x[0]``.
+
+    ## Rewards
+    ``reward = reward_forward + reward_energy + reward_ctrl + reward_failure``, each in ``info``:
+
+    - *reward_forward* = ``forward_reward_weight * forward_speed``: the centre of mass's
+      displacement along the goal direction over the step, divided by ``dt`` (m/s).
+    - *reward_energy* = ``-energy_cost_weight * |P_act|``: the actuator power (MODEL.md §3,
+      W), averaged in absolute value over the integrator steps of the control step.
+    - *reward_ctrl* = ``-ctrl_cost_weight * ||action||^2`` (normalized action).
+    - *reward_failure* = ``-failure_cost`` on the step that ends the episode by a failure.
+
+    ## Starting State
+    ``initial_shape="straight"``: a straight body with its rest shape straight, bent by
+    curvatures drawn from U(-s, s) at each interior node and turned by U(-s, s) rad about +x
+    (``s = reset_noise_scale``), head ahead, centre of mass at the origin, at rest. The body
+    starts along +x whatever ``goal_direction``: another goal makes a steering task.
+    ``initial_shape="serpenoid"``: the same around the serpenoid body ``kbar_j = 2 tan(alpha
+    sin(delta j) / 2)`` (``serpenoid_alpha``, ``serpenoid_delta``; the clock phase at t = 0),
+    its rest shape equal to that serpenoid. ``reset(options={"x", "v", "kbar", "lbar"})`` sets
+    the initial body exactly (missing parts: at rest, straight rest shape, ``x`` built from
+    ``kbar`` and ``lbar``); ``options={"goal_direction": angle}`` sets the episode's goal.
+    With ``randomize``, the physics is drawn anew at each reset, the values in
+    ``info["randomized"]``.
+
+    ## Episode End
+    ### Termination
+    A failed physics step: a non-finite state, a self-intersecting body, runaway stretch or a
+    Newton step that does not converge; ``info["failure"]`` names the reason, the observation is
+    the last valid one.
+    ### Truncation
+    1000 steps (10 s at the default ``dt``), by ``TimeLimit`` through ``gym.make``.
+
+    ## Info
+    Every step: ``forward_speed`` (m/s), ``x_position``, ``y_position`` (centre of mass, m),
+    ``heading`` (rad), ``time`` (s), ``fluid_power``, ``actuator_power`` (signed; both averaged
+    over the step, W), ``kappa``, ``kbar``, ``newton_iterations``, every ``reward_<term>``,
+    ``failure`` (None or the reason) and ``metrics``, the running episode summary (MODEL.md §8):
+    ``average_speed`` (distance / duration, m/s), ``distance`` (along the goal, m),
+    ``displacement``, ``duration``, ``cost_of_transport`` (actuator energy / (total mass g
+    distance); ``inf`` without forward progress), ``energy_fluid``, ``energy_actuator`` (sum of
+    |work| per integrator step, J), ``actuator_work`` (signed, J).
+
+    ## Arguments
+    ```python
+    import gymnasium as gym
+    import soft_snake_gym
+    env = gym.make("SoftEel-v0", max_curvature_rate=3.0, fluid={"rho": 1025.0})
+    env = gym.make("SoftEel-v0", config="configs/softeel.yaml")  # any keywords from YAML
+    ```
+    Keywords given explicitly override those from ``config``; unknown keys are rejected with
+    the closest valid name.
+
+    | Parameter             | Type              | Default        | Description                                                                 |
+    |-----------------------|-------------------|----------------|-----------------------------------------------------------------------------|
+    | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: water` key is accepted)         |
+    | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
+    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9): N, edge length and mass, a, b, E, damping           |
+    | `fluid`               | dict or `Fluid`   | `Fluid()`      | water: rho, C_f, C_D, C_A                                                   |
+    | `ground`              | dict or `Ground`  | `Ground()`     | unused in water; kept so one YAML file can describe both settings           |
+    | `integrator`          | dict or `Integrator` | `Integrator()` | backward Euler at h = 0.01 s by default (MODEL.md §5a)                   |
+    | `dt`                  | float or None     | `None`         | control step (s), a multiple of `integrator.h`; `None`: `integrator.h`      |
+    | `max_curvature_rate`  | float             | `2 pi`         | curvature rate (1/s) of action 1.0                                          |
+    | `max_rest_curvature`  | float             | `4.0`          | bound on `|kbar|` (turning angle 127°)                                      |
+    | `forward_reward_weight` | float           | `1.0`          | weight of *reward_forward* (per m/s)                                        |
+    | `energy_cost_weight`  | float             | `1e-3`         | weight of *reward_energy* (per W)                                           |
+    | `ctrl_cost_weight`    | float             | `1e-2`         | weight of *reward_ctrl*                                                     |
+    | `failure_cost`        | float             | `10.0`         | penalty on a failure                                                        |
+    | `reset_noise_scale`   | float             | `0.01`         | `s` of the Starting State                                                   |
+    | `initial_shape`       | str               | `"straight"`   | `"straight"` or `"serpenoid"`                                               |
+    | `serpenoid_alpha`     | float             | `pi/4`         | amplitude (rad) of the serpenoid initial body                               |
+    | `serpenoid_delta`     | float or None     | `None`         | phase offset (rad) between nodes; `None`: `2 pi/(N-2)` (pi/4 for N = 10)    |
+    | `goal_direction`      | float             | `0.0`          | goal direction (rad from +x)                                                |
+    | `max_observed_speed`  | float             | `2.0`          | bound of `com_velocity_body` (m/s)                                          |
+    | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping, rho, C_f, C_D, C_A, mu_s, mu_d |
+
+    ## Version History
+    * v0: initial version, on the PDER simulator of ``soft_snake_gym.physics``.
+    """
+
+    medium = "water"
+    settings_class = SwimSettings
+    env_id = "SoftEel-v0"
+    medium_energy_key = "energy_fluid"
+
+    def __init__(self, render_mode: str | None = None, config: Any = None, **kwargs: Any):
+        super().__init__(render_mode=render_mode, config=config, **kwargs)
+        s = self.settings
+        self.max_curvature_rate = float(s.max_curvature_rate)
+        self.max_rest_curvature = float(s.max_rest_curvature)
+        n = self.N - 2
+        delta = 2.0 * math.pi / n if s.serpenoid_delta is None else s.serpenoid_delta
+        self._kbar_initial = np.zeros(n)
+        if s.initial_shape == "serpenoid":
+            psi = serpenoid_phase(0.0, n, 0.0, delta)
+            self._kbar_initial = serpenoid(psi, 0.0, s.serpenoid_alpha)[0]
+            if np.abs(self._kbar_initial).max() > self.max_rest_curvature:
+                raise ValueError(
+                    f"serpenoid_alpha = {s.serpenoid_alpha!r} gives rest curvatures up to "
+                    f"{np.abs(self._kbar_initial).max():.3f}, beyond max_rest_curvature = "
+                    f"{self.max_rest_curvature!r}; lower the amplitude or raise the bound"
+                )
+
+    def _build_spaces(self) -> None:
+        s = self.settings
+        n = self.N - 2
+        self.observation_structure = {
+            "kappa": n, "kappa_dot": n, "kbar": n, "com_velocity_body": 2, "goal_direction_body": 2,
+        }
+        high = np.concatenate([
+            np.full(n, 2.0 * s.max_rest_curvature),
+            np.full(n, 4.0 * s.max_curvature_rate),
+            np.full(n, s.max_rest_curvature),
+            np.full(2, s.max_observed_speed),
+            np.ones(2),
+        ]).astype(np.float32)
+        self.observation_space = Box(-high, high, dtype=np.float32)
+        self.action_space = Box(-1.0, 1.0, (n,), dtype=np.float32)
+
+    def _set_inputs(self, action: np.ndarray) -> None:
+        np.multiply(action, self.max_curvature_rate, out=self._uk)
+        clip_rates(self._uk, self.sim._kbar, -self.max_rest_curvature, self.max_rest_curvature, self.dt)
+
+    def _observe(self, out: np.ndarray) -> None:
+        sim = self.sim
+        self._kappa = sim.kappa
+        swim_observation(self._kappa, sim.kappa_dot, sim._kbar, self._com_of(sim._v), sim.heading,
+                         self.goal_direction, out)
+
+    def _energy_power(self, d_actuator_energy: float, d_medium_energy: float) -> float:
+        return d_actuator_energy / self.dt
+
+    def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        lbar = np.full(self.N - 1, self.base_config.rod.edge_length)
+        return self._noisy_straight_body(rng, self._kbar_initial, lbar, length_noise=False)
+
+    def _check_options(self, body: dict[str, np.ndarray]) -> None:
+        kbar = body.get("kbar")
+        if kbar is not None and kbar.shape == (self.N - 2,) and np.abs(kbar).max() > self.max_rest_curvature:
+            raise ValueError(
+                f"reset option kbar reaches |kbar| = {np.abs(kbar).max():.4g}, beyond "
+                f"max_rest_curvature = {self.max_rest_curvature!r}; keep it within that bound"
+            )
+
+    def _state_info(self) -> dict[str, Any]:
+        sim = self.sim
+        com = self._com
+        return {
+            "x_position": float(com[0]),
+            "y_position": float(com[1]),
+            "heading": sim.heading,
+            "time": sim.time,
+            "fluid_power": self._power_medium,
+            "actuator_power": self._power_actuator,
+            "kappa": self._kappa,
+            "kbar": sim.kbar,
+            "newton_iterations": sim.newton_iterations,
+        }
