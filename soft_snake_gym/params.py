@@ -164,7 +164,8 @@ class Integrator:
         substeps: internal steps per ``h``; ``None`` picks 1 for backward Euler and, for the
             explicit method, enough that each sub-step is at most 0.5 / omega_max, with
             omega_max the rod's highest stretching frequency.
-        newton_tol: residual tolerance of a Newton step [N s], max-norm.
+        newton_tol: tolerance of a Newton step on the momentum residual divided by the node
+            masses, max-norm [m/s].
         newton_max_iter: iteration cap; a step that does not converge is reported as a failure.
         max_strain: a step with ``| |e|/lbar - 1 |`` above this is reported as runaway stretch.
         check_self_intersection: test the body for crossing edges after every step.
@@ -173,7 +174,7 @@ class Integrator:
     method: Literal["backward_euler", "symplectic_euler"] = "backward_euler"
     h: float = 0.01
     substeps: int | None = None
-    newton_tol: float = 1e-8
+    newton_tol: float = 1e-6
     newton_max_iter: int = 30
     max_strain: float = 0.5
     check_self_intersection: bool = True

@@ -434,7 +434,7 @@ def _classify_friction(q, v, kbar, lbar, prm, buf, J, ibuf):
 def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
     """Residual ``R = (M + M_A)(v - v0) - dt F(q0 + dt v, v)`` of backward Euler at the trial
     velocity ``v`` (also writes ``q``), and if ``jac`` its Jacobian into J. Returns
-    (squared 2-norm, max-norm, fluid power, friction power)."""
+    (squared 2-norm, max-norm of R/m [m/s], fluid power, friction power)."""
     n = q.size
     q0, v0, F, R, m = buf[B_Q0], buf[B_V0], buf[B_F], buf[B_R], buf[B_M]
     fext = buf[B_FEXT]
@@ -488,7 +488,7 @@ def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
     rmax = 0.0
     for i in range(n):
         norm2 += R[i] * R[i]
-        rmax = max(rmax, abs(R[i]))
+        rmax = max(rmax, abs(R[i]) / m[i])  # as a velocity: mass-independent tolerance
     return norm2, rmax, p_fluid, p_fric
 
 
@@ -504,9 +504,17 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     maxit = int(prm[P_MAXIT])
     if medium == MEDIUM_GROUND:
         _classify_friction(q, v, kbar, lbar, prm, buf, J, ibuf)
-    for i in range(n):
-        q0[i] = q[i]
-        v0[i] = v[i]
+        for i in range(n):
+            q0[i] = q[i]
+            v0[i] = v[i]
+    else:
+        # predictor: extrapolate the velocity from the last step (v0 still holds its start;
+        # set_state makes it the current velocity, so a fresh state starts with v)
+        for i in range(n):
+            q0[i] = q[i]
+            v_prev = v0[i]
+            v0[i] = v[i]
+            v[i] = 2.0 * v[i] - v_prev
     norm2, rmax, p_fluid, p_fric = _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, True)
     it = 0
     while rmax > tol:

@@ -11,7 +11,14 @@ from soft_snake_gym.params import SimConfig
 from soft_snake_gym.physics import kernels as K
 from soft_snake_gym.physics.banded import WIDTH
 
-__all__ = ["Simulator", "SimulationError", "body_from_curvature", "node_masses", "pack_params"]
+__all__ = [
+    "Simulator",
+    "SimulationError",
+    "allocate_arrays",
+    "body_from_curvature",
+    "node_masses",
+    "pack_params",
+]
 
 _MEDIA = {"none": K.MEDIUM_NONE, "water": K.MEDIUM_WATER, "ground": K.MEDIUM_GROUND}
 _METHODS = {"backward_euler": K.METHOD_BACKWARD_EULER, "symplectic_euler": K.METHOD_SYMPLECTIC_EULER}
@@ -107,6 +114,22 @@ def body_from_curvature(
     return x - (w @ x) / w.sum() + np.asarray(com, dtype=float)
 
 
+def allocate_arrays(N: int, batch: tuple[int, ...] = ()) -> tuple[np.ndarray, ...]:
+    """The state, parameter, scratch and diagnostic arrays of ``batch`` robots of N nodes, in
+    the order the kernels take them: q, v, kbar, lbar, prm, buf, J, ibuf, out."""
+    return (
+        np.zeros(batch + (2 * N,)),
+        np.zeros(batch + (2 * N,)),
+        np.zeros(batch + (N - 2,)),
+        np.zeros(batch + (N - 1,)),
+        np.zeros(batch + (K.N_PRM,)),
+        np.zeros(batch + (K.N_BUF, 2 * N)),
+        np.zeros(batch + (2 * N, WIDTH)),
+        np.zeros(batch + (K.N_IBUF, 2 * N), dtype=np.int64),
+        np.zeros(batch + (K.N_OUT,)),
+    )
+
+
 def _as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
     arr = np.asarray(value, dtype=np.float64)
     if arr.shape != shape:
@@ -139,20 +162,16 @@ class Simulator:
         array([0.001, 0.001])
     """
 
-    def __init__(self, config: SimConfig | None = None) -> None:
+    def __init__(self, config: SimConfig | None = None, *, _arrays: tuple | None = None) -> None:
         config = SimConfig() if config is None else config
         if not isinstance(config, SimConfig):
             raise TypeError(f"config must be a SimConfig, got {type(config).__name__}")
         self.N = N = config.rod.N
-        self._q = np.zeros(2 * N)
-        self._v = np.zeros(2 * N)
-        self._kbar = np.zeros(N - 2)
-        self._lbar = np.zeros(N - 1)
-        self._prm = np.zeros(K.N_PRM)
-        self._buf = np.zeros((K.N_BUF, 2 * N))
-        self._J = np.zeros((2 * N, WIDTH))
-        self._ibuf = np.zeros((K.N_IBUF, 2 * N), dtype=np.int64)
-        self._out = np.zeros(K.N_OUT)
+        if _arrays is None:
+            _arrays = allocate_arrays(N)
+        # views into a batch's stacked arrays when built by a BatchSimulator
+        (self._q, self._v, self._kbar, self._lbar, self._prm, self._buf, self._J, self._ibuf,
+         self._out) = _arrays
         self._zero_k = np.zeros(N - 2)
         self._zero_l = np.zeros(N - 1)
         self._scratch_k = np.zeros(N - 2)
@@ -232,6 +251,7 @@ class Simulator:
             np.minimum(self._q[0:-2:2], self._q[2::2]), kind="stable"
         )
         self._ibuf[K.I_FRICTION] = K.SLIDING
+        self._buf[K.B_V0] = self._v  # the stepper's predictor starts from the current velocity
         self.failure = None
 
     def set_external_force(self, force=None) -> None:
