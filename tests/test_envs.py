@@ -363,7 +363,7 @@ def test_non_finite_state_terminates_with_a_finite_observation():
              "check_self_intersection": False}
     env = gym.make("SoftEel-v0", integrator=integ)
     env.reset(seed=0)
-    for i in range(1000):
+    for _ in range(1000):
         obs, _, term, trunc, info = env.step(np.zeros(8, dtype=np.float32))
         if term or trunc:
             break
@@ -447,7 +447,11 @@ def test_yaml_configs_hold_the_defaults_and_keywords_override_them():
     worm = gym.make("SoftWorm-v0", config=ROOT / "configs/softworm.yaml", max_length_rate=0.4).unwrapped
     assert worm.settings == dataclasses.replace(InchSettings(), max_length_rate=0.4)
     assert worm.max_length_rate == 0.4
-    assert gym.make("SoftEel-v0", config=ROOT / "configs/eel.yaml").unwrapped.settings == SwimSettings()
+    # a simulator config file (with its medium key) is an env config too
+    from soft_snake_gym.config import load_sim_config
+
+    sim_file = ROOT / "configs/eel.yaml"
+    assert gym.make("SoftEel-v0", config=sim_file).unwrapped.sim.config == load_sim_config(sim_file)
 
 
 def test_config_errors_name_the_key_and_the_fix(tmp_path):

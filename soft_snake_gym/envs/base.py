@@ -2,9 +2,9 @@
 
 The environments are a thin task layer over one :class:`~soft_snake_gym.physics.Simulator`
 (built once per environment and reused by every ``reset``). The physics-to-observation and
-physics-to-reward code lives in plain functions of simulator quantities (``body_frame``,
-``reward_terms``, ``episode_metrics``, ``clip_rates``) so that a batched environment can reuse
-them on stacked arrays.
+physics-to-reward code lives in plain functions of simulator arrays and quantities
+(``soft_snake_gym.envs.observe`` for observations and inputs, ``reward_terms`` and
+``episode_metrics`` here) so that a batched environment can reuse them.
 """
 
 from __future__ import annotations
@@ -30,8 +30,6 @@ __all__ = [
     "Randomization",
     "BaseSettings",
     "SoftRobotEnv",
-    "body_frame",
-    "clip_rates",
     "reward_terms",
     "episode_metrics",
     "resolve_settings",
@@ -42,33 +40,6 @@ G = 9.81
 
 
 # --- plain functions of simulator quantities (batchable) ----------------------------------------
-def body_frame(vector: np.ndarray, heading: float | np.ndarray) -> np.ndarray:
-    """Components of a planar vector along the heading and to its left.
-
-    Args:
-        vector: (..., 2) in the world frame.
-        heading: body heading [rad], broadcast against ``vector[..., 0]``.
-
-    Returns:
-        (..., 2): (along the heading, lateral, positive to the left).
-    """
-    c, s = np.cos(heading), np.sin(heading)
-    vx, vy = vector[..., 0], vector[..., 1]
-    return np.stack((c * vx + s * vy, c * vy - s * vx), axis=-1)
-
-
-def clip_rates(rate: np.ndarray, value: np.ndarray, lo: float, hi: float, dt: float) -> np.ndarray:
-    """Limit rates so that ``value + dt * rate`` stays within ``[lo, hi]`` (in place).
-
-    A rate that would carry a state past a bound is cut to the rate that lands on the bound;
-    at the bound, a rate pointing outward becomes zero.
-    """
-    inv = 1.0 / dt
-    np.minimum(rate, (hi - value) * inv, out=rate)
-    np.maximum(rate, (lo - value) * inv, out=rate)
-    return rate
-
-
 def reward_terms(
     forward_speed: float,
     energy_power: float,
@@ -327,7 +298,7 @@ class SoftRobotEnv(gym.Env):
         box = self.observation_space
         self._obs_low = box.low.astype(np.float64)
         self._obs_high = box.high.astype(np.float64)
-        self._obs_buf = np.zeros(box.shape, dtype=np.float64)
+        self._obs_raw = np.zeros(box.shape, dtype=np.float64)  # unclipped, for info
         self._act_shape = self.action_space.shape
 
         self.goal_direction = s.goal_direction
@@ -346,12 +317,14 @@ class SoftRobotEnv(gym.Env):
     def _build_spaces(self) -> None:
         raise NotImplementedError
 
-    def _set_inputs(self, action: np.ndarray) -> None:
-        """Write the physical rates for ``action`` into ``self._uk`` / ``self._ul``."""
+    def _set_inputs(self, action: np.ndarray) -> float:
+        """Clip ``action`` to [-1, 1] in place and write the physical rates into ``self._uk`` /
+        ``self._ul``; return the squared norm of the clipped action (NaN if not finite)."""
         raise NotImplementedError
 
-    def _observe(self, out: np.ndarray) -> None:
-        """Write the unclipped observation (float64) into ``out``."""
+    def _observe(self, raw: np.ndarray, out: np.ndarray) -> None:
+        """Write the observation, unclipped into ``raw`` (float64) and clipped to the
+        observation space into ``out`` (float32); set ``self._heading``."""
         raise NotImplementedError
 
     def _energy_power(self, d_actuator_energy: float, d_medium_energy: float) -> float:
@@ -412,13 +385,19 @@ class SoftRobotEnv(gym.Env):
         return obs, info
 
     def step(self, action):
-        a = self._check_action(action)
         if self._failure is not None:
             raise RuntimeError(
                 f"{self.env_id} episode terminated ({self._failure}); call reset() before stepping again"
             )
+        a = self._check_action(action)
+        action_sq = self._set_inputs(a)
+        if action_sq != action_sq:  # NaN: a non-finite entry
+            bad = np.flatnonzero(~np.isfinite(a)).tolist()
+            raise ValueError(
+                f"{self.env_id} action has non-finite entries at indices {bad} ({a[bad].tolist()}); "
+                "every entry must be a finite number in [-1, 1]"
+            )
         sim = self.sim
-        self._set_inputs(a)
         e_act0, w_act0, e_med0 = sim.actuator_energy, sim.actuator_work, self._medium_energy()
         ok = sim.advance(self.n_substeps, self._uk, self._ul)
         if ok:
@@ -442,7 +421,7 @@ class SoftRobotEnv(gym.Env):
             obs = self._last_obs.copy()
         s = self.settings
         terms = reward_terms(
-            forward_speed, energy_power, float(a @ a), not ok, s.forward_reward_weight,
+            forward_speed, energy_power, action_sq, not ok, s.forward_reward_weight,
             s.energy_cost_weight, s.ctrl_cost_weight, s.failure_cost,
         )
         reward = sum(terms.values())
@@ -488,7 +467,7 @@ class SoftRobotEnv(gym.Env):
     # --- helpers --------------------------------------------------------------------------
     def _check_action(self, action) -> np.ndarray:
         try:
-            a = np.array(action, dtype=np.float64)  # a copy: clipped in place below
+            a = np.array(action, dtype=np.float64)  # a copy: _set_inputs clips it in place
         except (TypeError, ValueError) as err:
             raise ValueError(
                 f"{self.env_id} action {action!r} is not an array of numbers: {err}"
@@ -498,14 +477,6 @@ class SoftRobotEnv(gym.Env):
                 f"{self.env_id} action has shape {a.shape}; expected {self._act_shape} "
                 f"(one value in [-1, 1] per input)"
             )
-        if not np.isfinite(a).all():
-            bad = np.flatnonzero(~np.isfinite(a)).tolist()
-            raise ValueError(
-                f"{self.env_id} action has non-finite entries at indices {bad} ({a[bad].tolist()}); "
-                "every entry must be a finite number in [-1, 1]"
-            )
-        np.minimum(a, 1.0, out=a)
-        np.maximum(a, -1.0, out=a)
         return a
 
     def _com_of(self, flat: np.ndarray) -> np.ndarray:
@@ -516,13 +487,10 @@ class SoftRobotEnv(gym.Env):
         return self.sim.friction_work if self.medium == "ground" else self.sim.fluid_energy
 
     def _get_obs(self) -> np.ndarray:
-        buf = self._obs_buf
-        self._observe(buf)
-        np.minimum(buf, self._obs_high, out=buf)
-        np.maximum(buf, self._obs_low, out=buf)
-        obs = buf.astype(np.float32)
-        self._last_obs = obs
-        return obs.copy()
+        obs = np.empty(self._obs_raw.shape, dtype=np.float32)
+        self._observe(self._obs_raw, obs)
+        self._last_obs = obs.copy()  # returned again if the next step fails
+        return obs
 
     def _compute_metrics(self) -> dict[str, float]:
         sim = self.sim

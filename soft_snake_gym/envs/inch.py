@@ -2,42 +2,16 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 from gymnasium.spaces import Box
 
-from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number, clip_rates
+from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number
+from soft_snake_gym.envs.observe import inch_observation, scale_rates
 
-__all__ = ["InchEnv", "InchSettings", "inch_observation"]
-
-
-def inch_observation(
-    edge_lengths: np.ndarray,
-    edge_length_rates: np.ndarray,
-    lbar: np.ndarray,
-    stuck: np.ndarray,
-    com_velocity: np.ndarray,
-    heading: float,
-    out: np.ndarray,
-) -> np.ndarray:
-    """The ``SoftWorm-v0`` observation (unclipped, float64) written into ``out``.
-
-    Layout: edge_lengths (N-1), edge_length_rates (N-1), lbar (N-1), stuck (N, 0/1),
-    com_velocity_body (2: along the heading, lateral).
-    """
-    m = edge_lengths.size
-    out[:m] = edge_lengths
-    out[m : 2 * m] = edge_length_rates
-    out[2 * m : 3 * m] = lbar
-    out[3 * m : 4 * m + 1] = stuck
-    c, s = math.cos(heading), math.sin(heading)  # body_frame() for one robot, without arrays
-    vx, vy = com_velocity
-    out[4 * m + 1] = c * vx + s * vy
-    out[4 * m + 2] = c * vy - s * vx
-    return out
+__all__ = ["InchEnv", "InchSettings"]
 
 
 @dataclass(frozen=True)
@@ -194,15 +168,17 @@ class InchEnv(SoftRobotEnv):
         self.observation_space = Box(low, high, dtype=np.float32)
         self.action_space = Box(-1.0, 1.0, (m,), dtype=np.float32)
 
-    def _set_inputs(self, action: np.ndarray) -> None:
-        np.multiply(action, self.max_length_rate, out=self._ul)
-        clip_rates(self._ul, self.sim._lbar, self.lbar_limits[0], self.lbar_limits[1], self.dt)
+    def _set_inputs(self, action: np.ndarray) -> float:
+        lo, hi = self.lbar_limits
+        return scale_rates(action, self.max_length_rate, self.sim._lbar, lo, hi, self.dt, self._ul)
 
-    def _observe(self, out: np.ndarray) -> None:
+    def _observe(self, raw: np.ndarray, out: np.ndarray) -> None:
         sim = self.sim
-        self._lengths, self._stuck = sim.edge_lengths, sim.stuck
-        inch_observation(self._lengths, sim.edge_length_rates, sim._lbar, self._stuck,
-                         self._com_of(sim._v), sim.heading, out)
+        self._stuck = sim.stuck
+        self._heading = inch_observation(
+            sim.edge_lengths, sim.edge_length_rates, sim._lbar, self._stuck, sim._q, sim._v,
+            self._mass_fraction, self._obs_low, self._obs_high, raw, out,
+        )
 
     def _energy_power(self, d_actuator_energy: float, d_medium_energy: float) -> float:
         if self.settings.energy_source == "friction":
@@ -232,11 +208,11 @@ class InchEnv(SoftRobotEnv):
         return {
             "x_position": float(com[0]),
             "y_position": float(com[1]),
-            "heading": sim.heading,
+            "heading": self._heading,
             "time": sim.time,
             "friction_power": self._power_medium,
             "actuator_power": self._power_actuator,
-            "edge_lengths": self._lengths,
+            "edge_lengths": self._obs_raw[: self.N - 1].copy(),
             "lbar": sim.lbar,
             "stuck": self._stuck,
             "newton_iterations": sim.newton_iterations,

@@ -59,10 +59,17 @@ class BodyRenderer:
         ax = self.ax = self.fig.add_subplot(1, 1, 1)
         ax.set_facecolor(_GROUND if ground else _WATER)
         ax.set_aspect("equal")
-        ax.set_xticks([])
-        ax.set_yticks([])
         self.width = 2.0 * body_length
         self.height = self.width * size[1] / size[0]
+        bar = self._bar_length = _nice_length(0.25 * self.width)
+        from matplotlib.ticker import MultipleLocator
+
+        # a faint world grid (one scale bar apart) shows the motion while the view follows the body
+        ax.xaxis.set_major_locator(MultipleLocator(bar))
+        ax.yaxis.set_major_locator(MultipleLocator(bar))
+        ax.tick_params(length=0, labelbottom=False, labelleft=False)
+        ax.grid(True, color="white", lw=0.8, alpha=0.9)
+        ax.set_axisbelow(True)
         (self._trail_com,) = ax.plot([], [], color="#7f7f7f", lw=1.0, alpha=0.8)
         (self._trail_head,) = ax.plot([], [], color="#e377c2", lw=1.0, alpha=0.6)
         (self._body,) = ax.plot([], [], color="#1f4e79", lw=4.0, solid_capstyle="round", zorder=3)
@@ -70,7 +77,6 @@ class BodyRenderer:
         (self._head,) = ax.plot([], [], "o", color="#d62728", ms=7, zorder=5)
         (self._com,) = ax.plot([], [], "+", color="black", ms=12, mew=2, zorder=6)
         self._goal = None
-        bar = self._bar_length = _nice_length(0.25 * self.width)
         (self._scale,) = ax.plot([], [], color="black", lw=2.5, zorder=6)
         self._scale_text = ax.text(0, 0, f"{bar:g} m", ha="center", va="bottom", fontsize=9, zorder=6)
         self._time_text = ax.text(0.02, 0.97, "", transform=ax.transAxes, ha="left", va="top",

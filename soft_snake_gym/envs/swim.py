@@ -9,38 +9,11 @@ from typing import Any, Literal
 import numpy as np
 from gymnasium.spaces import Box
 
-from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number, clip_rates
+from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number
+from soft_snake_gym.envs.observe import scale_rates, swim_observation
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
 
-__all__ = ["SwimEnv", "SwimSettings", "swim_observation"]
-
-
-def swim_observation(
-    kappa: np.ndarray,
-    kappa_dot: np.ndarray,
-    kbar: np.ndarray,
-    com_velocity: np.ndarray,
-    heading: float,
-    goal_direction: float,
-    out: np.ndarray,
-) -> np.ndarray:
-    """The ``SoftEel-v0`` observation (unclipped, float64) written into ``out``.
-
-    Layout: kappa (N-2), kappa_dot (N-2), kbar (N-2), com_velocity_body (2: along the heading,
-    lateral), goal_direction_body (2: cos and sin of the goal direction minus the heading).
-    """
-    n = kappa.size
-    out[:n] = kappa
-    out[n : 2 * n] = kappa_dot
-    out[2 * n : 3 * n] = kbar
-    c, s = math.cos(heading), math.sin(heading)  # body_frame() for one robot, without arrays
-    vx, vy = com_velocity
-    out[3 * n] = c * vx + s * vy
-    out[3 * n + 1] = c * vy - s * vx
-    rel = goal_direction - heading
-    out[3 * n + 2] = math.cos(rel)
-    out[3 * n + 3] = math.sin(rel)
-    return out
+__all__ = ["SwimEnv", "SwimSettings"]
 
 
 @dataclass(frozen=True)
@@ -220,15 +193,16 @@ class SwimEnv(SoftRobotEnv):
         self.observation_space = Box(-high, high, dtype=np.float32)
         self.action_space = Box(-1.0, 1.0, (n,), dtype=np.float32)
 
-    def _set_inputs(self, action: np.ndarray) -> None:
-        np.multiply(action, self.max_curvature_rate, out=self._uk)
-        clip_rates(self._uk, self.sim._kbar, -self.max_rest_curvature, self.max_rest_curvature, self.dt)
+    def _set_inputs(self, action: np.ndarray) -> float:
+        k = self.max_rest_curvature
+        return scale_rates(action, self.max_curvature_rate, self.sim._kbar, -k, k, self.dt, self._uk)
 
-    def _observe(self, out: np.ndarray) -> None:
+    def _observe(self, raw: np.ndarray, out: np.ndarray) -> None:
         sim = self.sim
-        self._kappa = sim.kappa
-        swim_observation(self._kappa, sim.kappa_dot, sim._kbar, self._com_of(sim._v), sim.heading,
-                         self.goal_direction, out)
+        self._heading = swim_observation(
+            sim.kappa, sim.kappa_dot, sim._kbar, sim._q, sim._v, self._mass_fraction,
+            self.goal_direction, self._obs_low, self._obs_high, raw, out,
+        )
 
     def _energy_power(self, d_actuator_energy: float, d_medium_energy: float) -> float:
         return d_actuator_energy / self.dt
@@ -251,11 +225,11 @@ class SwimEnv(SoftRobotEnv):
         return {
             "x_position": float(com[0]),
             "y_position": float(com[1]),
-            "heading": sim.heading,
+            "heading": self._heading,
             "time": sim.time,
             "fluid_power": self._power_medium,
             "actuator_power": self._power_actuator,
-            "kappa": self._kappa,
+            "kappa": self._obs_raw[: self.N - 2].copy(),
             "kbar": sim.kbar,
             "newton_iterations": sim.newton_iterations,
         }
