@@ -190,5 +190,7 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # python -m soft_snake_gym.cli: use the importable module's registry
+    from soft_snake_gym.cli import main as _main
+
+    sys.exit(_main())

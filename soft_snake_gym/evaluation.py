@@ -27,6 +27,9 @@ import numpy as np
 
 __all__ = ["EpisodeRecorder", "evaluate", "make_eval_env", "summarize", "format_table", "COLUMNS"]
 
+VIDEO_FPS = 25
+"""Frames per second of ``--video`` (the env renders only the frames kept)."""
+
 #: (key, label, unit) of the summary table, in order; rows whose key is absent are skipped.
 COLUMNS = [
     ("return", "return", "-"),
@@ -173,16 +176,19 @@ def evaluate(policy: Any, env, episodes: int = 3, transient: float = 2.0,
     inner = env.envs[0].unwrapped
     error_key = "curvature_error" if inner.medium == "water" else "length_error"
     frames: list[np.ndarray] = []
-    recording = {"on": video is not None}
+    stride = max(1, int(round(1.0 / (VIDEO_FPS * inner.dt))))  # render only the frames kept
+    recording = {"on": video is not None, "step": 0}
 
     def on_step(i: int, info: dict) -> None:
         if recording["on"] and i == 0:
             if "terminal_observation" in info:  # the env has already been reset
                 recording["on"] = False
                 return
-            frame = env.envs[0].render()
-            if frame is not None:
-                frames.append(frame)
+            recording["step"] += 1
+            if recording["step"] % stride == 0:
+                frame = env.envs[0].render()
+                if frame is not None:
+                    frames.append(frame)
 
     rec = EpisodeRecorder(inner.dt, transient, error_key, on_step if video is not None else None)
     if video is not None:
@@ -191,7 +197,7 @@ def evaluate(policy: Any, env, episodes: int = 3, transient: float = 2.0,
     evaluate_policy(policy, env, n_eval_episodes=episodes, deterministic=deterministic,
                     callback=rec, return_episode_rewards=True, warn=False)
     if video is not None:
-        write_video(frames, video, fps=min(50, int(round(1.0 / inner.dt))), stride=max(1, int(round(0.02 / inner.dt))))
+        write_video(frames, video, fps=round(1.0 / (stride * inner.dt)))
     return rec.episodes
 
 
