@@ -345,9 +345,10 @@ def test_self_intersection_terminates_with_the_reason():
     env = gym.make("SoftEel-v0")
     kbar = np.full(8, 3.9)  # eight turns of 125 degrees: the body crosses itself
     x = body_from_curvature(kbar, np.full(9, 0.18))
-    prev, _ = env.reset(seed=0, options={"x": x, "kbar": kbar})
+    prev, prev_info = env.reset(seed=0, options={"x": x, "kbar": kbar})
     obs, reward, term, trunc, info = env.step(np.zeros(8, dtype=np.float32))
     assert term and not trunc
+    assert info["x_position"] == prev_info["x_position"] and np.array_equal(info["kappa"], prev_info["kappa"])
     assert info["failure"] == "self_intersection"
     assert info["reward_failure"] == -10.0 and reward == pytest.approx(-10.0)
     assert env.observation_space.contains(obs) and np.array_equal(obs, prev)

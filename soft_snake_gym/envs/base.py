@@ -378,6 +378,7 @@ class SoftRobotEnv(gym.Env):
         self._record_trail()
         obs = self._get_obs()
         info = self._state_info()
+        self._last_state_info = info.copy()
         info["randomized"] = dict(self.randomized)
         info["failure"] = None
         if self.render_mode == "human":
@@ -425,7 +426,11 @@ class SoftRobotEnv(gym.Env):
             s.energy_cost_weight, s.ctrl_cost_weight, s.failure_cost,
         )
         reward = sum(terms.values())
-        info = self._state_info() if ok else {}
+        if ok:
+            info = self._state_info()
+            self._last_state_info = info.copy()
+        else:  # the last valid state, in new arrays (returned data must not be shared)
+            info = {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in self._last_state_info.items()}
         info["forward_speed"] = forward_speed
         info.update(terms)
         info["failure"] = self._failure

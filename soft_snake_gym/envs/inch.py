@@ -95,7 +95,8 @@ class InchEnv(SoftRobotEnv):
     ## Episode End
     ### Termination
     A failed physics step (non-finite state, self-intersection, runaway stretch, a Newton step
-    that does not converge); ``info["failure"]`` names the reason.
+    that does not converge); ``info["failure"]`` names the reason; the observation, the state
+    entries of ``info`` and ``info["metrics"]`` are those of the last valid state.
     ### Truncation
     1000 steps (10 s at the default ``dt``), by ``TimeLimit`` through ``gym.make``.
 

@@ -102,8 +102,8 @@ class SwimEnv(SoftRobotEnv):
     ## Episode End
     ### Termination
     A failed physics step: a non-finite state, a self-intersecting body, runaway stretch or a
-    Newton step that does not converge; ``info["failure"]`` names the reason, the observation is
-    the last valid one.
+    Newton step that does not converge; ``info["failure"]`` names the reason; the observation,
+    the state entries of ``info`` and ``info["metrics"]`` are those of the last valid state.
     ### Truncation
     1000 steps (10 s at the default ``dt``), by ``TimeLimit`` through ``gym.make``.
 
