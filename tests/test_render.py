@@ -80,6 +80,19 @@ def test_human_mode_without_a_display_is_a_clear_error(monkeypatch):
         gym.make("SoftEel-v0", render_mode="human")
 
 
+def test_human_mode_with_a_display_but_no_window_backend_is_a_clear_error(monkeypatch):
+    import matplotlib
+
+    monkeypatch.setenv("DISPLAY", ":99")
+    previous = matplotlib.get_backend()
+    matplotlib.use("agg")  # as MPLBACKEND=agg, or no usable display, would choose
+    try:
+        with pytest.raises(RuntimeError, match="interactive matplotlib backend.*'agg'.*rgb_array"):
+            gym.make("SoftEel-v0", render_mode="human")
+    finally:
+        matplotlib.use(previous)
+
+
 def test_record_video_writes_an_episode(tmp_path):
     pytest.importorskip("moviepy")
     from gymnasium.wrappers import RecordVideo

@@ -289,6 +289,10 @@ class SoftRobotEnv(gym.Env):
             raise ValueError(
                 f"render_mode = {render_mode!r} is not supported; use None, 'rgb_array' or 'human'"
             )
+        if render_mode == "human":
+            from soft_snake_gym.envs.render import require_interactive_backend
+
+            require_interactive_backend()  # fail at construction, not at the first frame
         self.render_mode = render_mode
         self._renderer = None
 

@@ -11,7 +11,22 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BodyRenderer"]
+__all__ = ["BodyRenderer", "require_interactive_backend"]
+
+_NON_INTERACTIVE = ("agg", "pdf", "ps", "svg", "pgf", "cairo", "template")
+
+
+def require_interactive_backend() -> None:
+    """Raise ``RuntimeError`` unless matplotlib's backend can open a window."""
+    import matplotlib
+
+    backend = matplotlib.get_backend().lower()
+    if backend in _NON_INTERACTIVE or "inline" in backend:
+        raise RuntimeError(
+            f"render_mode='human' needs an interactive matplotlib backend, but the backend is "
+            f"{backend!r} (no usable display, or MPLBACKEND chose it); set MPLBACKEND to e.g. "
+            "TkAgg or QtAgg on a machine with a display, or use render_mode='rgb_array'"
+        )
 
 _WATER = "#d8ecf7"
 _GROUND = "#efe6d2"
@@ -39,15 +54,9 @@ class BodyRenderer:
         dpi = 100
         figsize = (size[0] / dpi, size[1] / dpi)
         if human:
-            import matplotlib
+            require_interactive_backend()
             import matplotlib.pyplot as plt
 
-            backend = matplotlib.get_backend().lower()
-            if backend in ("agg", "pdf", "ps", "svg", "cairo", "template") or "inline" in backend:
-                raise RuntimeError(
-                    f"render_mode='human' needs an interactive matplotlib backend, but the backend "
-                    f"is {backend!r}; set MPLBACKEND (e.g. TkAgg or QtAgg) or use render_mode='rgb_array'"
-                )
             self._plt = plt
             self.fig = plt.figure(figsize=figsize, dpi=dpi)
         else:
