@@ -53,10 +53,10 @@ class StudyGrid:
 
     alpha_min: float = 0.15
     alpha_max: float | None = None  # None: 0.95 x the self-intersection limit
-    n_alpha: int = 6
+    n_alpha: int = 8
     omega_min: float = 0.5
     omega_max: float = math.pi
-    n_omega: int = 6
+    n_omega: int = 8
     e_bend: tuple[float, ...] = (1.87e4, 1.87e5, 1.875e6)
     mu_s_min: float = 0.2
     mu_s_max: float = 1.2

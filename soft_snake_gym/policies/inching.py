@@ -34,6 +34,12 @@ class InchingParams:
         direction: +1 the wave travels tail to head (moves the worm toward the head), -1 the
             reverse.
         l0: uncompressed edge length [m]; None: the env's rest edge length.
+        rest_gain: ``r`` [1/s] of the open loop's ``u = lbar_dot_des + r (lbar_des - lbar)`` (10;
+            0: the bare law). ``lbar`` is the controller's own command, not a measurement, so
+            this stays open loop in the body; it removes the offset a start at ``l0`` (the
+            env's default) would otherwise leave in the rest lengths for the whole episode.
+            The closed loop (:class:`InchingPID`) does not use it: its feedback on the
+            measured length removes that offset already.
     """
 
     eps: float = 0.3
@@ -41,6 +47,7 @@ class InchingParams:
     delta_l: float | None = None
     direction: int = 1
     l0: float | None = None
+    rest_gain: float = 10.0
 
     def __post_init__(self) -> None:
         if not 0 <= self.eps < 1:
@@ -49,6 +56,8 @@ class InchingParams:
             raise ValueError(f"omega = {self.omega!r} rad/s must be >= 0")
         if self.direction not in (1, -1):
             raise ValueError(f"direction = {self.direction!r} must be +1 or -1")
+        if not self.rest_gain >= 0:
+            raise ValueError(f"rest_gain = {self.rest_gain!r} 1/s must be >= 0")
         if self.l0 is not None and not self.l0 > 0:
             raise ValueError(f"l0 = {self.l0!r} m must be > 0")
 
@@ -70,7 +79,8 @@ class InchingPIDParams(InchingParams):
 
 
 class InchingWave(BaselinePolicy):
-    """Open loop ``u_l = lbar_dot_des`` (MODEL.md §7). State per env: ``[t]``.
+    """Open loop ``u_l = lbar_dot_des + rest_gain (lbar_des - lbar)`` (MODEL.md §7; the bare
+    ``u_l = lbar_dot_des`` once the rest lengths are on the wave). State per env: ``[t]``.
 
     Args:
         env: SoftWorm env (or a DummyVecEnv of them).
@@ -79,7 +89,7 @@ class InchingWave(BaselinePolicy):
 
     name = "inching"
     Params = InchingParams
-    needs = ("edge_lengths",)
+    needs = ("edge_lengths", "lbar")
     controls = "edge lengths"
     suggestion = "use 'open-loop', 'pid' or 'decentralized' on SoftEel-v0"
 
@@ -102,10 +112,10 @@ class InchingWave(BaselinePolicy):
         lbar_des, lbar_dot_des = self.desired(t)
         lengths = self.block(obs, "edge_lengths")
         state[:, 0] = t + self.layout.dt
-        return self._law(lbar_des, lbar_dot_des, lengths), np.abs(lbar_des - lengths)
+        return self._law(lbar_des, lbar_dot_des, lengths, self.block(obs, "lbar")), np.abs(lbar_des - lengths)
 
-    def _law(self, lbar_des, lbar_dot_des, lengths):
-        return lbar_dot_des
+    def _law(self, lbar_des, lbar_dot_des, lengths, lbar):
+        return lbar_dot_des + self.params.rest_gain * (lbar_des - lbar)
 
 
 class InchingPID(InchingWave):
@@ -120,5 +130,5 @@ class InchingPID(InchingWave):
     name = "inching-pid"
     Params = InchingPIDParams
 
-    def _law(self, lbar_des, lbar_dot_des, lengths):
+    def _law(self, lbar_des, lbar_dot_des, lengths, lbar):
         return lbar_dot_des + self.params.Kp * (lbar_des - lengths)
