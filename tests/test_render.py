@@ -14,6 +14,7 @@ from soft_snake_gym.gaits import serpenoid, serpenoid_phase
 
 BODY_RGB = np.array([0x1F, 0x4E, 0x79])  # the body's colour in render.py
 HEAD_RGB = np.array([0xD6, 0x27, 0x28])
+STUCK_RGB = np.array([0xFF, 0x7F, 0x0E])
 
 
 def mask(frame, rgb, tol=40):
@@ -63,6 +64,11 @@ def test_worm_frame_renders_on_ground_colour():
     corner, corner_water = frame[200, 5], water.render()[200, 5]
     assert not np.array_equal(corner, corner_water)
     assert mask(frame, BODY_RGB).sum() > 500
+    assert mask(frame, STUCK_RGB).sum() == 0  # nothing has stuck before the first step
+    for _ in range(100):  # at rest on the ground, the nodes stick
+        _, _, _, _, info = env.step(np.zeros(9, dtype=np.float32))
+    assert info["stuck"].sum() >= 5
+    assert mask(env.render(), STUCK_RGB).sum() > 20 * (info["stuck"].sum() - 1)
 
 
 def test_render_without_a_mode_warns_and_returns_none():

@@ -461,6 +461,7 @@ class SoftRobotEnv(gym.Env):
             self.sim.x if self._failure is None else self._last_x,
             np.asarray(self._trail_com), np.asarray(self._trail_head),
             self.sim.time, self._goal, self.env_id, self._failure,
+            self.sim.stuck if self._failure is None and self.medium == "ground" else None,
         )
 
     def close(self) -> None:

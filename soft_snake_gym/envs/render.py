@@ -1,10 +1,11 @@
 """Drawing the robot with matplotlib: headless (Agg canvas) images, or a window.
 
 ``BodyRenderer`` owns one figure whose artists are created once and updated per frame: the
-body (edges and nodes, head marked), the recent trails of the centre of mass and of the head,
-the centre of mass, the goal direction, a scale bar and the time. The view follows the centre
-of mass. The Agg canvas is used directly, so rendering never needs a display and never changes
-matplotlib's global backend; ``human=True`` opens a pyplot window instead.
+body (edges and nodes, head marked, nodes stuck to the ground as orange squares), the recent
+trails of the centre of mass and of the head, the centre of mass, the goal direction, a scale
+bar over a world grid and the time. The view follows the centre of mass. The Agg canvas is
+used directly, so rendering never needs a display and never changes matplotlib's global
+backend; ``human=True`` opens a pyplot window instead.
 """
 
 from __future__ import annotations
@@ -83,6 +84,7 @@ class BodyRenderer:
         (self._trail_head,) = ax.plot([], [], color="#e377c2", lw=1.0, alpha=0.6)
         (self._body,) = ax.plot([], [], color="#1f4e79", lw=4.0, solid_capstyle="round", zorder=3)
         (self._nodes,) = ax.plot([], [], "o", color="#1f4e79", ms=4, zorder=4)
+        (self._stuck,) = ax.plot([], [], "s", color="#ff7f0e", ms=6, zorder=5)
         (self._head,) = ax.plot([], [], "o", color="#d62728", ms=7, zorder=5)
         (self._com,) = ax.plot([], [], "+", color="black", ms=12, mew=2, zorder=6)
         self._goal = None
@@ -94,7 +96,8 @@ class BodyRenderer:
                                     fontsize=9, color="#d62728", zorder=6)
 
     def draw(self, x: np.ndarray, trail_com: np.ndarray, trail_head: np.ndarray, time: float,
-             goal: np.ndarray, title: str = "", failure: str | None = None) -> np.ndarray | None:
+             goal: np.ndarray, title: str = "", failure: str | None = None,
+             stuck: np.ndarray | None = None) -> np.ndarray | None:
         """Draw one frame.
 
         Args:
@@ -105,6 +108,7 @@ class BodyRenderer:
             goal: unit goal direction, (2,).
             title: shown next to the time.
             failure: a failure reason to show, if any.
+            stuck: which nodes stick to the ground, (N,) bool, drawn as orange squares.
 
         Returns:
             The image, (height, width, 3) uint8, off-screen; ``None`` in human mode.
@@ -113,6 +117,8 @@ class BodyRenderer:
         self._body.set_data(x[:, 0], x[:, 1])
         self._nodes.set_data(x[:, 0], x[:, 1])
         self._head.set_data([x[-1, 0]], [x[-1, 1]])
+        held = x[stuck] if stuck is not None else x[:0]
+        self._stuck.set_data(held[:, 0], held[:, 1])
         self._com.set_data([com[0]], [com[1]])
         if len(trail_com):
             self._trail_com.set_data(trail_com[:, 0], trail_com[:, 1])
