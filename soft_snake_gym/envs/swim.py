@@ -51,7 +51,9 @@ class SwimEnv(SoftRobotEnv):
     moves the rest curvature ``kbar`` of the 8 interior nodes; the body follows through its
     elasticity and the water pushes back. The task is to swim along a goal direction (+x by
     default; the body starts along +x with its head, node N-1, ahead). A serpenoid travelling
-    wave from head to tail (``soft_snake_gym.gaits.serpenoid``) swims at about 0.2 m/s.
+    wave from head to tail (``soft_snake_gym.gaits.serpenoid``) run open loop swims at
+    0.23 m/s at alpha = pi/4, omega = pi rad/s, and at 0.13 m/s at the thesis gait (alpha =
+    pi/6, omega = 2 pi/3 rad/s).
 
     ## Action Space
     A `Box(-1, 1, (N-2,), float32)`: the curvature rates ``u_k = max_curvature_rate * action``
