@@ -166,7 +166,8 @@ def _load_subcommands() -> None:
     """Import the modules that register further subcommands."""
     import importlib
 
-    for module in ("soft_snake_gym.sweep", "soft_snake_gym.figures"):
+    for module in ("soft_snake_gym.sweep", "soft_snake_gym.figures", "soft_snake_gym.reproduce",
+                   "soft_snake_gym.training", "soft_snake_gym.compare"):
         try:
             importlib.import_module(module)
         except ModuleNotFoundError as err:

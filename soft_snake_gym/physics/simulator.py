@@ -413,8 +413,8 @@ class Simulator:
     # --- metrics of the last step and accumulated ------------------------------------------
     @property
     def time(self) -> float:
-        """Simulated time since the last reset [s]."""
-        return float(self._out[K.O_TIME])
+        """Simulated time since the last reset [s] (steps times h, so it does not drift)."""
+        return float(self._out[K.O_NSTEPS] * self.h)
 
     @property
     def newton_iterations(self) -> int:

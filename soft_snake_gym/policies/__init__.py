@@ -102,6 +102,12 @@ def load_model(path: str | Path, env: Any) -> Any:
     return model
 
 
+def _env_id(env: Any) -> str:
+    inner = env.envs[0] if hasattr(env, "envs") else env
+    spec = getattr(inner.unwrapped, "spec", None) or getattr(inner, "spec", None)
+    return spec.id if spec is not None else inner.unwrapped.env_id
+
+
 def make_policy(spec: str, env: Any, config: str | Path | None = None) -> Any:
     """Build a baseline from ``"name[:key=value,...]"`` or load a model from a path.
 
@@ -116,10 +122,16 @@ def make_policy(spec: str, env: Any, config: str | Path | None = None) -> Any:
         ConfigError: unknown name or key, malformed option, missing model file.
         PolicyEnvMismatch: the policy cannot control this env.
     """
+    if spec.startswith("zoo:"):  # an agent shipped with the package
+        from soft_snake_gym.training import load_trained, zoo_path
+
+        return load_trained(zoo_path(_env_id(env), spec[4:]), env)
     name, params = parse_policy_spec(spec)
     if name not in BASELINES:
-        if _looks_like_path(spec):
-            return load_model(spec, env)
+        if _looks_like_path(spec):  # a run folder or model zip, with its VecNormalize statistics
+            from soft_snake_gym.training import load_trained
+
+            return load_trained(spec, env)
         close = difflib.get_close_matches(name, list(BASELINES), n=1)
         hint = f"; did you mean {close[0]!r}?" if close else ""
         raise ConfigError(

@@ -1,0 +1,649 @@
+"""Stable-Baselines3 training: YAML hyperparameters keyed by env id, run folders, resume,
+and an evaluation callback that scores the agent against a baseline controller.
+
+A run folder holds everything needed to reproduce or continue a run::
+
+    runs/SoftEel-v0_PPO_s0/
+      config.yaml          the resolved configuration (run settings and hyperparameters)
+      command.txt          the exact command line
+      meta.json            package version, git commit, library versions, start time
+      tb/                  TensorBoard logs
+      progress.csv         SB3's training log
+      learning_curve.csv   agent and baseline evaluations on the same seeds
+      checkpoints/         periodic model and VecNormalize statistics (resume from the last)
+      best_model.zip       the best model by evaluation return (+ best_vecnormalize.pkl)
+      final_model.zip      the model at the end (+ vecnormalize.pkl)
+
+Hyperparameters follow rl-baselines3-zoo's files (``configs/ppo.yml``): a mapping from env
+id to plain YAML (``n_envs``, ``n_timesteps``, ``normalize``, ``policy_kwargs`` and the
+algorithm's own keyword arguments); nothing is ``eval``'d, and unknown keys are rejected.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import difflib
+import inspect
+import json
+import math
+import platform
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from soft_snake_gym.config import ConfigError, load_yaml
+
+__all__ = [
+    "zoo_path",
+    "TrainConfig",
+    "TrainedPolicy",
+    "load_train_config",
+    "train",
+    "load_trained",
+    "ALGOS",
+    "ACTIVATIONS",
+]
+
+ALGOS = ("PPO", "SAC")
+ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
+DEFAULT_BASELINES = {"SoftEel-v0": "pid", "SoftWorm-v0": "inching-pid"}
+CONFIGS = Path(__file__).resolve().parent / "configs"
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run.
+
+    Attributes:
+        env_id: the environment (``SoftEel-v0``, ``SoftWorm-v0``).
+        algo: ``PPO`` or ``SAC``.
+        n_envs: parallel environments.
+        n_timesteps: total environment steps.
+        normalize: wrap the envs in ``VecNormalize`` (observations and rewards).
+        vec_env: ``dummy`` (one process) or ``subproc`` (one process per env).
+        policy: the SB3 policy class name.
+        policy_kwargs: plain YAML; ``activation_fn`` is a name in :data:`ACTIVATIONS`.
+        env_kwargs: keywords for ``gym.make`` (the env's own arguments).
+        hyperparams: the algorithm's keyword arguments (``learning_rate``, ``gamma``...).
+        seed: seeds the algorithm and the training envs.
+        eval_freq: evaluate every this many environment steps (0: never).
+        eval_episodes: episodes per evaluation, on seeds ``eval_seed, eval_seed + 1, ...``.
+        eval_seed: first evaluation seed.
+        checkpoint_freq: save a checkpoint every this many environment steps.
+        baseline: the baseline policy spec evaluated once per run on the same seeds
+            (``none`` to skip).
+    """
+
+    env_id: str
+    algo: str = "PPO"
+    n_envs: int = 8
+    n_timesteps: int = 1_000_000
+    normalize: bool = True
+    vec_env: str = "dummy"
+    policy: str = "MlpPolicy"
+    policy_kwargs: dict[str, Any] = field(default_factory=dict)
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    hyperparams: dict[str, Any] = field(default_factory=dict)
+    seed: int = 0
+    eval_freq: int = 50_000
+    eval_episodes: int = 5
+    eval_seed: int = 1000
+    checkpoint_freq: int = 50_000
+    baseline: str = "default"
+
+    def __post_init__(self) -> None:
+        if self.algo not in ALGOS:
+            raise ConfigError(f"algo = {self.algo!r} is not supported; use one of {', '.join(ALGOS)}")
+        for name in ("n_envs", "n_timesteps", "eval_episodes"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"{name} = {value!r} must be a positive integer")
+        for name in ("eval_freq", "checkpoint_freq", "seed", "eval_seed"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ConfigError(f"{name} = {value!r} must be an integer >= 0")
+        if self.vec_env not in ("dummy", "subproc"):
+            raise ConfigError(f"vec_env = {self.vec_env!r} must be 'dummy' or 'subproc'")
+        if not isinstance(self.normalize, bool):
+            raise ConfigError(f"normalize = {self.normalize!r} must be true or false")
+        act = self.policy_kwargs.get("activation_fn")
+        if act is not None and act not in ACTIVATIONS:
+            raise ConfigError(f"policy_kwargs.activation_fn = {act!r} must be one of {', '.join(ACTIVATIONS)}")
+        _check_hyperparams(self.algo, self.hyperparams)
+
+    @property
+    def baseline_spec(self) -> str | None:
+        """The baseline to score against, or None."""
+        if self.baseline == "none":
+            return None
+        if self.baseline == "default":
+            return DEFAULT_BASELINES.get(self.env_id)
+        return self.baseline
+
+    def to_yaml_dict(self) -> dict[str, Any]:
+        """The zoo-style mapping ``{env_id: {...}}`` of this config."""
+        data = dataclasses.asdict(self)
+        env_id = data.pop("env_id")
+        hyper = data.pop("hyperparams")
+        return {env_id: {**data, **hyper}}
+
+
+_RUN_KEYS = {f.name for f in dataclasses.fields(TrainConfig)} - {"env_id", "hyperparams"}
+
+
+def _algo_class(algo: str):
+    import stable_baselines3 as sb3
+
+    return getattr(sb3, algo)
+
+
+def _check_hyperparams(algo: str, hyper: dict[str, Any]) -> None:
+    params = inspect.signature(_algo_class(algo).__init__).parameters
+    reserved = {"self", "policy", "env", "policy_kwargs", "seed", "tensorboard_log", "verbose",
+                "_init_setup_model", "device"}
+    valid = sorted(set(params) - reserved)
+    for key, value in hyper.items():
+        if key not in valid:
+            close = difflib.get_close_matches(key, valid + sorted(_RUN_KEYS), n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise ConfigError(f"unknown hyperparameter {key!r} for {algo}{hint}")
+        if isinstance(value, str) and key not in ("gradient_steps",):
+            raise ConfigError(
+                f"hyperparameter {key} = {value!r} is a string; give a number (schedules and "
+                "code are not evaluated from YAML)"
+            )
+
+
+def load_train_config(env_id: str, algo: str = "PPO", path: str | Path | None = None,
+                      overrides: dict[str, Any] | None = None) -> TrainConfig:
+    """The run configuration for ``env_id`` from a zoo-style YAML file and overrides.
+
+    Args:
+        env_id: the key to read in the file.
+        algo: selects the default file ``configs/<algo>.yml`` shipped in the package.
+        path: another YAML file of the same layout.
+        overrides: run settings or hyperparameters that win over the file
+            (``{"n_timesteps": 1000, "learning_rate": 1e-4}``).
+
+    Raises:
+        ConfigError: a missing or malformed file, an env id the file lacks, unknown keys.
+    """
+    path = Path(path) if path is not None else CONFIGS / f"{algo.lower()}.yml"
+    data = load_yaml(path)
+    if env_id not in data:
+        known = ", ".join(map(str, data)) or "none"
+        raise ConfigError(f"{path.name} has no section for env id {env_id!r} (it has: {known})")
+    section = data[env_id]
+    if not isinstance(section, dict):
+        raise ConfigError(f"{path.name}: the section {env_id!r} must be a mapping of keys to values")
+    merged = {"algo": algo, **section, **(overrides or {})}
+    run = {k: v for k, v in merged.items() if k in _RUN_KEYS}
+    hyper = {k: v for k, v in merged.items() if k not in _RUN_KEYS}
+    for key in ("n_timesteps", "eval_freq", "checkpoint_freq"):
+        if isinstance(run.get(key), float) and float(run[key]).is_integer():
+            run[key] = int(run[key])  # 2.0e6 in YAML
+    return TrainConfig(env_id=env_id, hyperparams=hyper, **run)
+
+
+# --- environments ---------------------------------------------------------------------------
+def _check_env_id(env_id: str) -> None:
+    import gymnasium as gym
+
+    from soft_snake_gym.envs import register_envs
+
+    register_envs()
+    if env_id not in gym.registry:
+        ours = [k for k in gym.registry if k.startswith("Soft")]
+        close = difflib.get_close_matches(env_id, list(gym.registry), n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise ConfigError(f"environment id {env_id!r} does not exist{hint} (this package has {', '.join(ours)})")
+
+
+def make_train_env(cfg: TrainConfig, seed: int):
+    """The vectorized training env (Monitor-wrapped, seeded ``seed, seed + 1, ...``)."""
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    cls = SubprocVecEnv if cfg.vec_env == "subproc" else DummyVecEnv
+    return make_vec_env(cfg.env_id, n_envs=cfg.n_envs, seed=seed, env_kwargs=dict(cfg.env_kwargs),
+                        vec_env_cls=cls)
+
+
+def _policy_kwargs(cfg: TrainConfig) -> dict[str, Any]:
+    import torch.nn as nn
+
+    kwargs = dict(cfg.policy_kwargs)
+    act = kwargs.pop("activation_fn", None)
+    if act is not None:
+        kwargs["activation_fn"] = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU,
+                                   "leaky_relu": nn.LeakyReLU}[act]
+    if "net_arch" in kwargs and isinstance(kwargs["net_arch"], dict):
+        kwargs["net_arch"] = {k: list(v) for k, v in kwargs["net_arch"].items()}
+    return kwargs
+
+
+# --- trained policies as plain predict() objects --------------------------------------------
+class TrainedPolicy:
+    """A trained SB3 model with its ``VecNormalize`` observation statistics, behaving like
+    the baselines: ``predict`` takes raw observations, so it runs through the same
+    evaluation as any controller."""
+
+    def __init__(self, model: Any, obs_rms: Any | None, clip_obs: float = 10.0, epsilon: float = 1e-8,
+                 name: str = "trained") -> None:
+        self.model = model
+        self.obs_rms = obs_rms
+        self.clip_obs = clip_obs
+        self.epsilon = epsilon
+        self.name = name
+        self.observation_space = model.observation_space
+        self.action_space = model.action_space
+
+    def normalize(self, obs: np.ndarray) -> np.ndarray:
+        if self.obs_rms is None:
+            return obs
+        return np.clip((obs - self.obs_rms.mean) / np.sqrt(self.obs_rms.var + self.epsilon),
+                       -self.clip_obs, self.clip_obs).astype(np.float32)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        return self.model.predict(self.normalize(np.asarray(observation)), state, episode_start,
+                                  deterministic)
+
+    def __repr__(self) -> str:
+        return f"TrainedPolicy({self.name})"
+
+
+def _find_model(path: Path) -> tuple[Path, Path | None]:
+    """The model zip and its VecNormalize statistics for a run folder or a zip."""
+    if path.is_dir():
+        for name, stats in (("best_model.zip", "best_vecnormalize.pkl"),
+                            ("final_model.zip", "vecnormalize.pkl"),
+                            ("model.zip", "vecnormalize.pkl")):
+            if (path / name).is_file():
+                return path / name, (path / stats if (path / stats).is_file() else None)
+        ckpt = latest_checkpoint(path)
+        if ckpt is not None:
+            return ckpt
+        raise ConfigError(
+            f"run folder {str(path)!r} holds no model (best_model.zip, final_model.zip or a checkpoint)"
+        )
+    if not path.is_file():
+        raise ConfigError(f"model {str(path)!r} does not exist; give a run folder or a .zip written by training")
+    for stats in (path.with_name(path.stem.replace("model", "vecnormalize") + ".pkl"),
+                  path.parent / "vecnormalize.pkl"):
+        if stats.is_file() and stats != path:
+            return path, stats
+    return path, None
+
+
+def load_trained(path: str | Path, env: Any | None = None) -> TrainedPolicy:
+    """Load a trained agent from a run folder or a model zip (with the VecNormalize
+    statistics saved beside it) as a :class:`TrainedPolicy`.
+
+    Raises:
+        ConfigError: nothing loadable at ``path``.
+        PolicyEnvMismatch: the model does not fit ``env``.
+    """
+    import pickle
+
+    from soft_snake_gym.policies import load_model
+
+    model_path, stats_path = _find_model(Path(path))
+    model = load_model(model_path, env) if env is not None else _load_any(model_path)
+    obs_rms, clip = None, 10.0
+    if stats_path is not None:
+        with open(stats_path, "rb") as fh:
+            vn = pickle.load(fh)
+        if getattr(vn, "norm_obs", True):
+            obs_rms, clip = vn.obs_rms, vn.clip_obs
+    return TrainedPolicy(model, obs_rms, clip, name=str(path))
+
+
+def _load_any(path: Path):
+    import stable_baselines3 as sb3
+
+    for algo in ALGOS:
+        try:
+            return getattr(sb3, algo).load(path, device="cpu")
+        except Exception:  # noqa: BLE001 - try the next algorithm
+            continue
+    raise ConfigError(f"{str(path)!r} is not a loadable PPO or SAC model")
+
+
+ZOO = Path(__file__).resolve().parent / "zoo"
+
+
+def zoo_path(env_id: str, algo: str) -> Path:
+    """The folder of the agent shipped with the package for ``env_id`` and ``algo``."""
+    path = ZOO / env_id / algo.lower()
+    if not (path / "model.zip").is_file():
+        shipped = sorted(f"zoo:{p.name} on {p.parent.name}" for p in ZOO.glob("*/*") if (p / "model.zip").is_file())
+        raise ConfigError(
+            f"no shipped {algo.lower()} agent for {env_id}; shipped agents: {', '.join(shipped) or 'none'}"
+        )
+    return path
+
+
+def latest_checkpoint(run_dir: Path) -> tuple[Path, Path | None] | None:
+    """The newest checkpoint of a run folder (model zip, VecNormalize pickle or None)."""
+    ckpts = sorted((run_dir / "checkpoints").glob("model_*_steps.zip"),
+                   key=lambda p: int(p.stem.split("_")[1]))
+    if not ckpts:
+        return None
+    model = ckpts[-1]
+    stats = model.with_name(f"vecnormalize_{model.stem.split('_')[1]}_steps.pkl")
+    return model, (stats if stats.is_file() else None)
+
+
+# --- callbacks ------------------------------------------------------------------------------
+def _make_callbacks(cfg: TrainConfig, run_dir: Path, train_env):
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+    from soft_snake_gym.evaluation import evaluate, make_eval_env, summarize
+    from soft_snake_gym.policies import make_policy
+
+    class Checkpoint(BaseCallback):
+        """Model and VecNormalize statistics every ``checkpoint_freq`` environment steps."""
+
+        def __init__(self):
+            super().__init__()
+            self.last = 0
+
+        def _on_step(self) -> bool:
+            if cfg.checkpoint_freq and self.num_timesteps - self.last >= cfg.checkpoint_freq:
+                save_checkpoint(self.model, run_dir)
+                self.last = self.num_timesteps
+            return True
+
+    class BaselineEval(BaseCallback):
+        """Scores the agent every ``eval_freq`` steps and the baseline once, on the same
+        seeds with the same metrics; logs both and appends them to learning_curve.csv."""
+
+        def __init__(self):
+            super().__init__()
+            self.last = -1
+            self.best = -math.inf
+            self.baseline: dict[str, tuple[float, float]] | None = None
+            self.env = make_eval_env(cfg.env_id, n_envs=1, seed=cfg.eval_seed, env_kwargs=cfg.env_kwargs)
+            self.csv = run_dir / "learning_curve.csv"
+            if self.csv.is_file():  # resumed: keep the best so far and the baseline line
+                with open(self.csv) as fh:
+                    rows = list(csv.DictReader(fh))
+                if rows:
+                    self.best = max(float(r["return_mean"]) for r in rows)
+
+        def _score(self, policy) -> dict[str, tuple[float, float]]:
+            self.env.seed(cfg.eval_seed)
+            return summarize(evaluate(policy, self.env, episodes=cfg.eval_episodes))
+
+        def _on_step(self) -> bool:
+            if not cfg.eval_freq or (self.last >= 0 and self.num_timesteps - self.last < cfg.eval_freq):
+                return True
+            self.last = self.num_timesteps
+            if self.baseline is None and cfg.baseline_spec is not None:
+                self.baseline = self._score(make_policy(cfg.baseline_spec, self.env))
+            vn = self.model.get_vec_normalize_env()
+            agent = TrainedPolicy(self.model, vn.obs_rms if vn is not None else None,
+                                  vn.clip_obs if vn is not None else 10.0)
+            scores = self._score(agent)
+            row = {"timesteps": self.num_timesteps, "wall_s": round(time.time() - START[0], 1)}
+            for key in ("return", "average_speed", "cost_of_transport"):
+                row[f"{key}_mean"], row[f"{key}_std"] = scores.get(key, (math.nan, math.nan))
+                self.logger.record(f"eval/{key}", row[f"{key}_mean"])
+                if self.baseline is not None:
+                    row[f"baseline_{key}"] = self.baseline.get(key, (math.nan,))[0]
+                    self.logger.record(f"eval/baseline_{key}", row[f"baseline_{key}"])
+            new = not self.csv.is_file()
+            with open(self.csv, "a", newline="") as fh:
+                writer = csv.DictWriter(fh, fieldnames=list(row))
+                if new:
+                    writer.writeheader()
+                writer.writerow(row)
+            if row["return_mean"] > self.best:
+                self.best = row["return_mean"]
+                self.model.save(run_dir / "best_model.zip")
+                if vn is not None:
+                    vn.save(str(run_dir / "best_vecnormalize.pkl"))
+            return True
+
+        def _on_training_end(self) -> None:
+            if cfg.eval_freq and self.last != self.num_timesteps:
+                self.last = -1
+                self._on_step()
+
+    return CallbackList([Checkpoint(), BaselineEval()])
+
+
+START = [time.time()]
+
+
+def save_checkpoint(model, run_dir: Path) -> Path:
+    """Save the model and its VecNormalize statistics under ``checkpoints/``."""
+    ckdir = run_dir / "checkpoints"
+    ckdir.mkdir(parents=True, exist_ok=True)
+    steps = model.num_timesteps
+    path = ckdir / f"model_{steps}_steps.zip"
+    model.save(path)
+    vn = model.get_vec_normalize_env()
+    if vn is not None:
+        vn.save(str(ckdir / f"vecnormalize_{steps}_steps.pkl"))
+    return path
+
+
+# --- the run --------------------------------------------------------------------------------
+def _git_commit() -> str | None:
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5,
+                             cwd=Path(__file__).resolve().parent)
+        return out.stdout.strip() or None if out.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def _write_run_files(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> None:
+    import gymnasium
+    import stable_baselines3
+    import torch
+
+    import soft_snake_gym
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.yaml").write_text(yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False))
+    (run_dir / "command.txt").write_text(shlex.join(command if command is not None else sys.argv) + "\n")
+    meta = {
+        "soft_snake_gym": soft_snake_gym.__version__,
+        "git_commit": _git_commit(),
+        "python": platform.python_version(),
+        "stable_baselines3": stable_baselines3.__version__,
+        "torch": torch.__version__,
+        "gymnasium": gymnasium.__version__,
+        "numpy": np.__version__,
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+    (run_dir / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
+
+
+def _make_logger(run_dir: Path):
+    """SB3's logger writing progress.csv into the run folder and TensorBoard into tb/; a
+    resumed run moves the earlier progress.csv aside (progress.1.csv, ...) instead of
+    overwriting it."""
+    from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoardOutputFormat
+
+    csv_path = run_dir / "progress.csv"
+    if csv_path.is_file():
+        k = 1
+        while (run_dir / f"progress.{k}.csv").exists():
+            k += 1
+        csv_path.rename(run_dir / f"progress.{k}.csv")
+    return Logger(str(run_dir), [CSVOutputFormat(str(csv_path)), TensorBoardOutputFormat(str(run_dir / "tb"))])
+
+
+def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress: bool = True,
+          command: list[str] | None = None) -> Path:
+    """Train (or, with ``resume``, continue) a run in ``run_dir``; returns the final model path.
+
+    An interrupt (Ctrl-C) saves a checkpoint before returning; a killed run resumes from its
+    last periodic checkpoint.
+
+    Raises:
+        ConfigError: an unknown env id, a resume folder without a checkpoint, a config that
+            SB3 rejects.
+    """
+    import torch
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    _check_env_id(cfg.env_id)
+    run_dir = Path(run_dir)
+    START[0] = time.time()
+    torch.set_num_threads(1)  # small MLPs: threads cost more than they give on 2 cores
+    algo = _algo_class(cfg.algo)
+    if resume:
+        found = latest_checkpoint(run_dir) if run_dir.is_dir() else None
+        if found is None:
+            raise ConfigError(
+                f"cannot resume {str(run_dir)!r}: it has no checkpoint (checkpoints/model_*_steps.zip); "
+                "start a new run without --resume"
+            )
+        model_path, stats_path = found
+        env = make_train_env(cfg, seed=cfg.seed + 7919 * (1 + int(model_path.stem.split("_")[1])))
+        if cfg.normalize:
+            if stats_path is None:
+                raise ConfigError(f"checkpoint {model_path.name} has no VecNormalize statistics beside it")
+            env = VecNormalize.load(str(stats_path), env)
+        model = algo.load(model_path, env=env, device="cpu")
+        remaining = cfg.n_timesteps - model.num_timesteps
+    else:
+        if run_dir.exists() and any(run_dir.iterdir()):
+            raise ConfigError(
+                f"run folder {str(run_dir)!r} already exists and is not empty; "
+                "pass --resume to continue it or choose another --run-dir"
+            )
+        _write_run_files(cfg, run_dir, command)
+        env = make_train_env(cfg, seed=cfg.seed)
+        if cfg.normalize:
+            env = VecNormalize(env, gamma=cfg.hyperparams.get("gamma", 0.99))
+        try:
+            model = algo(cfg.policy, env, policy_kwargs=_policy_kwargs(cfg), seed=cfg.seed, device="cpu",
+                         verbose=0, **cfg.hyperparams)
+        except (TypeError, ValueError) as err:
+            raise ConfigError(f"{cfg.algo} rejected the configuration: {err}") from None
+        remaining = cfg.n_timesteps
+    model.set_logger(_make_logger(run_dir))
+    callbacks = _make_callbacks(cfg, run_dir, env)
+    try:
+        if remaining > 0:
+            model.learn(remaining, callback=callbacks, reset_num_timesteps=not resume,
+                        progress_bar=progress)
+    except KeyboardInterrupt:
+        save_checkpoint(model, run_dir)
+        raise
+    finally:
+        env.close()
+    final = run_dir / "final_model.zip"
+    model.save(final)
+    vn = model.get_vec_normalize_env()
+    if vn is not None:
+        vn.save(str(run_dir / "vecnormalize.pkl"))
+    save_checkpoint(model, run_dir)
+    return final
+
+
+# --- command line ---------------------------------------------------------------------------
+def _parse_overrides(items: list[str] | None) -> dict[str, Any]:
+    """``key=value`` pairs; values are YAML scalars or lists (``net_arch=[128,128]``), dotted
+    keys reach ``policy_kwargs`` and ``env_kwargs`` (``policy_kwargs.log_std_init=-0.5``)."""
+    from soft_snake_gym.cli import CLIError
+
+    out: dict[str, Any] = {}
+    for item in items or []:
+        key, eq, text = item.partition("=")
+        if not eq or not key.strip():
+            raise CLIError(f"--hyperparams {item!r} is not key=value; write e.g. --hyperparams gamma=0.999")
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError:
+            raise CLIError(f"--hyperparams {item!r}: {text!r} is not a YAML value") from None
+        node = out
+        parts = key.strip().split(".")
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node[parts[-1]] = value
+    return out
+
+
+def _train_arguments(p) -> None:
+    p.add_argument("env_id", nargs="?", default="SoftEel-v0", help="environment id (default SoftEel-v0)")
+    p.add_argument("--algo", default="PPO", type=str.upper, choices=ALGOS, help="algorithm (default PPO)")
+    p.add_argument("--config", metavar="YAML",
+                   help="zoo-style hyperparameter file keyed by env id (default: the package's "
+                        "configs/<algo>.yml)")
+    p.add_argument("--hyperparams", nargs="+", metavar="KEY=VALUE",
+                   help="override run settings or hyperparameters, e.g. gamma=0.999 n_envs=4")
+    p.add_argument("--n-timesteps", type=int, help="total environment steps (overrides the config)")
+    p.add_argument("--seed", type=int, help="seed (overrides the config)")
+    p.add_argument("--run-dir", metavar="DIR", help="run folder (default runs/<env>_<algo>_s<seed>)")
+    p.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its last checkpoint")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _train(args) -> int:
+    from soft_snake_gym.cli import CLIError
+
+    overrides = _parse_overrides(args.hyperparams)
+    for key in ("n_timesteps", "seed"):
+        if getattr(args, key) is not None:
+            overrides[key] = getattr(args, key)
+    if args.resume:
+        run_dir = Path(args.resume)
+        if args.run_dir or args.config:
+            raise CLIError("--resume continues a run with its own config.yaml; drop --run-dir and --config")
+        if not (run_dir / "config.yaml").is_file():
+            raise CLIError(f"cannot resume {str(run_dir)!r}: it has no config.yaml (is it a run folder?)")
+        saved = load_yaml(run_dir / "config.yaml")
+        env_id = next(iter(saved))
+        algo = saved[env_id].get("algo", "PPO")
+        cfg = load_train_config(env_id, algo, run_dir / "config.yaml", overrides)
+    else:
+        _check_env_id(args.env_id)
+        cfg = load_train_config(args.env_id, args.algo, args.config, overrides)
+        run_dir = Path(args.run_dir or f"runs/{cfg.env_id}_{cfg.algo}_s{cfg.seed}")
+    print(f"training {cfg.algo} on {cfg.env_id} for {cfg.n_timesteps} steps with {cfg.n_envs} envs "
+          f"-> {run_dir}" + (" (resumed)" if args.resume else ""))
+    t0 = time.time()
+    try:
+        final = train(cfg, run_dir, resume=bool(args.resume), progress=not args.no_progress)
+    except KeyboardInterrupt:
+        print(f"interrupted; a checkpoint was saved. Continue with: soft-snake train --resume {run_dir}",
+              file=sys.stderr)
+        return 130
+    wall = time.time() - t0
+    print(f"done in {wall:.0f} s; final model {final}")
+    curve = run_dir / "learning_curve.csv"
+    if curve.is_file():
+        with open(curve) as fh:
+            last = list(csv.DictReader(fh))[-1]
+        line = (f"last evaluation at {last['timesteps']} steps: return {float(last['return_mean']):.4g}, "
+                f"average speed {float(last['average_speed_mean']):.4g} m/s")
+        if "baseline_return" in last:
+            line += (f" (baseline {cfg.baseline_spec}: return {float(last['baseline_return']):.4g}, "
+                     f"average speed {float(last['baseline_average_speed']):.4g} m/s)")
+        print(line)
+    print(f"evaluate it with: soft-snake evaluate {cfg.env_id} --policy {run_dir}")
+    return 0
+
+
+def _register() -> None:
+    from soft_snake_gym.cli import subcommand
+
+    subcommand("train", "train an SB3 agent (PPO or SAC) with YAML hyperparameters; resumable",
+               _train_arguments)(_train)
+
+
+_register()

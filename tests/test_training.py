@@ -1,0 +1,131 @@
+"""PPO training through the real CLI, scaled down: run folders, evaluation, resume, errors."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from soft_snake_gym.cli import main
+from soft_snake_gym.training import TrainConfig, load_train_config
+
+TINY = ["n_envs=2", "n_steps=64", "batch_size=64", "n_epochs=2", "eval_freq=128", "checkpoint_freq=128",
+        "eval_episodes=1", "env_kwargs.max_episode_steps=100"]
+
+
+def cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "soft_snake_gym.cli", *args], capture_output=True,
+                          text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def trained_run(tmp_path_factory) -> Path:
+    run = tmp_path_factory.mktemp("runs") / "eel"
+    out = cli("train", "SoftEel-v0", "--n-timesteps", "256", "--run-dir", str(run), "--no-progress",
+              "--hyperparams", *TINY)
+    assert out.returncode == 0, out.stderr
+    assert "last evaluation at 256 steps" in out.stdout and "baseline pid" in out.stdout
+    return run
+
+
+def test_run_folder_holds_everything_needed_to_reproduce(trained_run):
+    run = trained_run
+    for name in ("config.yaml", "command.txt", "meta.json", "progress.csv", "learning_curve.csv",
+                 "best_model.zip", "best_vecnormalize.pkl", "final_model.zip", "vecnormalize.pkl"):
+        assert (run / name).is_file(), name
+    assert list((run / "tb").glob("events.out.tfevents.*"))
+    ckpts = sorted(p.name for p in (run / "checkpoints").iterdir())
+    assert "model_128_steps.zip" in ckpts and "vecnormalize_128_steps.pkl" in ckpts
+    # the resolved config loads back to the same run configuration
+    cfg = load_train_config("SoftEel-v0", path=run / "config.yaml")
+    assert isinstance(cfg, TrainConfig) and cfg.n_timesteps == 256 and cfg.n_envs == 2
+    assert cfg.hyperparams["n_steps"] == 64 and cfg.env_kwargs == {"max_episode_steps": 100}
+    assert "train SoftEel-v0 --n-timesteps 256" in (run / "command.txt").read_text()
+    meta = json.loads((run / "meta.json").read_text())
+    assert meta["soft_snake_gym"] and "git_commit" in meta and meta["stable_baselines3"]
+    with open(run / "learning_curve.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [int(r["timesteps"]) for r in rows][-1] == 256
+    # the baseline line: PID on the same seeds, faster than an untrained agent
+    assert float(rows[0]["baseline_average_speed"]) > 0.05
+    assert float(rows[-1]["baseline_average_speed"]) == float(rows[0]["baseline_average_speed"])
+    assert float(rows[0]["average_speed_mean"]) < float(rows[0]["baseline_average_speed"])
+
+
+def test_evaluate_loads_the_run_and_resume_continues_it(trained_run):
+    out = cli("evaluate", "SoftEel-v0", "--policy", str(trained_run), "--episodes", "1", "--max-steps", "100")
+    assert out.returncode == 0, out.stderr
+    assert "average speed" in out.stdout and "cost of transport" in out.stdout
+    out = cli("train", "--resume", str(trained_run), "--n-timesteps", "384", "--no-progress")
+    assert out.returncode == 0, out.stderr
+    assert "(resumed)" in out.stdout
+    assert (trained_run / "checkpoints" / "model_384_steps.zip").is_file()
+    assert (trained_run / "progress.1.csv").is_file()  # the first part's log is kept
+    with open(trained_run / "learning_curve.csv") as fh:
+        steps = [int(r["timesteps"]) for r in csv.DictReader(fh)]
+    assert steps[-1] == 384 and steps == sorted(steps)
+
+
+def test_ctrl_c_keeps_a_checkpoint_that_resumes(tmp_path):
+    run = tmp_path / "interrupted"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "soft_snake_gym.cli", "train", "SoftEel-v0", "--n-timesteps", "100000",
+         "--run-dir", str(run), "--no-progress", "--hyperparams", *TINY, "eval_freq=0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    deadline = time.time() + 240
+    while not list((run / "checkpoints").glob("model_*_steps.zip")) and time.time() < deadline:
+        time.sleep(0.5)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "soft-snake train --resume" in err and "Traceback" not in err
+    saved = [int(p.stem.split("_")[1]) for p in (run / "checkpoints").glob("model_*_steps.zip")]
+    target = max(saved) + 128
+    out = cli("train", "--resume", str(run), "--n-timesteps", str(target), "--no-progress")
+    assert out.returncode == 0, out.stderr
+    assert (run / "checkpoints" / f"model_{target}_steps.zip").is_file()
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["train", "SoftEal-v0"], "environment id 'SoftEal-v0' does not exist; did you mean 'SoftEel-v0'"),
+        (["train", "SoftEel-v0", "--hyperparams", "gama=0.99"], "unknown hyperparameter 'gama' for PPO; did you mean 'gamma'"),
+        (["train", "SoftEel-v0", "--hyperparams", "learning_rate=lin_3e-4"], "is a string"),
+        (["train", "SoftEel-v0", "--config", "{bad}"], "not valid YAML"),
+        (["train", "--resume", "{empty}"], "has no checkpoint"),
+        (["evaluate", "SoftEel-v0", "--policy", "runs/nope/model.zip"], "does not exist"),
+        (["compare", "SoftEel-v0", "--policies", "pid", "zoo:dqn"], "no shipped dqn agent"),
+    ],
+)
+def test_bad_training_input_gets_one_line_and_exit_2(args, message, tmp_path, capsys):
+    bad = tmp_path / "bad.yml"
+    bad.write_text("SoftEel-v0:\n  gamma: [0.99\n")
+    empty = tmp_path / "empty_run"
+    empty.mkdir()
+    yaml.safe_dump({"SoftEel-v0": {"algo": "PPO", "n_timesteps": 10}}, open(empty / "config.yaml", "w"))
+    args = [a.replace("{bad}", str(bad)).replace("{empty}", str(empty)) for a in args]
+    code = main(args)
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert message in err and len(err.splitlines()) == 1, err
+
+
+def test_hyperparameter_file_is_plain_yaml_keyed_by_env_id():
+    for env_id in ("SoftEel-v0", "SoftWorm-v0"):
+        cfg = load_train_config(env_id)
+        assert cfg.algo == "PPO" and cfg.n_envs >= 1 and cfg.normalize
+        assert cfg.baseline_spec == {"SoftEel-v0": "pid", "SoftWorm-v0": "inching-pid"}[env_id]
+    sac = load_train_config("SoftEel-v0", "SAC")
+    assert sac.algo == "SAC" and "buffer_size" in sac.hyperparams
+    assert os.path.basename(str(load_train_config.__module__)) == "soft_snake_gym.training"
