@@ -64,3 +64,28 @@ def test_parallel_swim_cells_match_serial(tmp_path):
         assert np.isclose(a[key]["average_speed"], b[key]["average_speed"], rtol=1e-12)
         assert a[key]["failure"] == ""
     assert os.path.getsize(par["csv"]) > 0
+
+
+def test_findings_count_comparisons_the_way_the_thesis_states():
+    from soft_snake_gym.reproduce import findings
+
+    gait = []
+    for ctrl, gain in (("open-loop", 1.0), ("pid", 1.2)):
+        for a in (0.2, 0.6, 1.0):
+            for w in (1.0, 2.0):
+                speed = gain * w * a * (1.2 - a)  # rises with omega, peaks inside the alpha range
+                gait.append({"controller": ctrl, "alpha": a, "omega": w, "average_speed": speed,
+                             "curvature_error": 0.1 / gain, "mean_fluid_power": gain * a * w,
+                             "energy_actuator": gain * a * w, "failure": ""})
+    stiff = [{"controller": "open-loop", "alpha": 0.5, "omega": 1.0, "E_bend": e, "average_speed": s,
+              "failure": ""} for e, s in ((1e4, 0.01), (1e5, 0.02), (1e6, 0.03))]
+    inch = [{"controller": c, "mu_s": ms, "mu_d": md, "distance": k * (ms - md + 1), "energy_friction": k * md,
+             "failure": ""} for c, k in (("inching", 1.0), ("inching-pid", 2.0))
+            for ms in (0.4, 0.8) for md in (0.4, 0.8) if md <= ms]
+    verdicts = {f["finding"]: f["verdict"] for f in findings(gait, stiff, inch)}
+    assert set(verdicts.values()) == {"yes"}, verdicts
+    # flip one trend and its verdict must change
+    for r in stiff:
+        r["average_speed"] = -r["average_speed"]
+    verdicts = {f["finding"]: f["verdict"] for f in findings(gait, stiff, inch)}
+    assert verdicts["Stiffer bodies swim faster open loop"] == "no"
