@@ -74,7 +74,7 @@ def test_evaluate_a_trained_model_and_reject_it_on_the_other_env(capsys, tmp_pat
         (["SoftEel-v0", "--policy", "pid:alpha"], "is not key=value"),
         (["SoftWorm-v0", "--policy", "pid"], "use 'inching' or 'inching-pid' on SoftWorm-v0"),
         (["SoftEel-v0", "--policy", "inching-pid"], "on SoftEel-v0"),
-        (["SoftEel-v0", "--policy", "models/missing.zip"], "model file 'models/missing.zip' does not exist"),
+        (["SoftEel-v0", "--policy", "models/missing.zip"], "'models/missing.zip' does not exist"),
         (["SoftEel-v0", "--policy", "pid", "--episodes", "0"], "must be at least 1"),
         (["SoftEel-v0", "--policy", "pid", "--video", "x.avi"], "must end in .mp4 or .gif"),
     ],

@@ -43,9 +43,10 @@ def test_interrupted_sweep_resumes_without_recomputing(tmp_path):
         assert final[key]["wall_time"] == wall
     with csv_path.open() as f:
         assert sum(1 for _ in f) == 1 + len(cells)  # one header, each cell exactly once
-    # more static and less kinetic friction go further (the thesis's finding, MODEL.md §9)
-    d = {(r["controller"], r["mu_s"], r["mu_d"]): r["distance"] for r in final.values()}
-    assert d[("inching", 1.0, 0.4)] > d[("inching", 0.4, 0.4)]
+    # the worm moves toward its head in every cell, and more kinetic friction costs more energy
+    assert all(r["distance"] > 0.05 for r in final.values())
+    e = {(r["controller"], r["mu_s"], r["mu_d"]): r["energy_friction"] for r in final.values()}
+    assert e[("inching", 1.0, 1.0)] > 2 * e[("inching", 1.0, 0.4)]
     for png in ("inch-friction_distance.png", "inch-friction_energy_friction.png"):
         assert (out / png).stat().st_size > 10_000
 
