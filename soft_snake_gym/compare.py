@@ -19,6 +19,11 @@ METRICS = [
     ("return", "return", "-"),
 ]
 CHART = ("average_speed", "cost_of_transport", "return")
+#: What ``soft-snake compare ENV`` compares when no --policies are given.
+DEFAULT_POLICIES = {
+    "SoftEel-v0": ["zoo:ppo", "pid", "open-loop"],
+    "SoftWorm-v0": ["zoo:ppo", "inching-pid", "inching"],
+}
 
 
 def compare(env_id: str, specs: list[str], episodes: int = 10, seed: int = 0,
@@ -82,10 +87,10 @@ def plot_comparison(results: dict[str, dict[str, tuple[float, float]]], path: st
 
 
 def _arguments(p) -> None:
-    p.add_argument("env_id", help="environment id")
-    p.add_argument("--policies", nargs="+", required=True, metavar="SPEC",
+    p.add_argument("env_id", nargs="?", default="SoftEel-v0", help="environment id (default SoftEel-v0)")
+    p.add_argument("--policies", nargs="+", metavar="SPEC",
                    help="baselines (pid, open-loop, 'pid:alpha=0.6', inching-pid...), run folders, "
-                        "model zips or zoo:ppo")
+                        "model zips or zoo:ppo (default: the env's baselines and its shipped PPO agent)")
     p.add_argument("--episodes", type=int, default=10, help="episodes per policy (default 10)")
     p.add_argument("--seed", type=int, default=0, help="first seed; every policy gets the same (default 0)")
     p.add_argument("--out", metavar="PNG", help="bar chart path (default compare_<env_id>.png)")
@@ -97,7 +102,10 @@ def _run(args) -> int:
 
     if args.episodes < 1:
         raise CLIError(f"--episodes {args.episodes} must be at least 1")
-    results = compare(args.env_id, args.policies, args.episodes, args.seed)
+    specs = args.policies or DEFAULT_POLICIES.get(args.env_id)
+    if not specs:
+        raise CLIError(f"give --policies for {args.env_id} (defaults exist for {', '.join(DEFAULT_POLICIES)})")
+    results = compare(args.env_id, specs, args.episodes, args.seed)
     title = f"{args.env_id}: {args.episodes} episodes per policy, seeds {args.seed}..{args.seed + args.episodes - 1}"
     print(format_comparison(results, title))
     out = plot_comparison(results, args.out or f"compare_{args.env_id}.png", title)

@@ -162,6 +162,17 @@ def _check_hyperparams(algo: str, hyper: dict[str, Any]) -> None:
             )
 
 
+def _deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """``base`` updated by ``over``; nested mappings merge key by key."""
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _deep_merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
 def load_train_config(env_id: str, algo: str = "PPO", path: str | Path | None = None,
                       overrides: dict[str, Any] | None = None) -> TrainConfig:
     """The run configuration for ``env_id`` from a zoo-style YAML file and overrides.
@@ -184,7 +195,7 @@ def load_train_config(env_id: str, algo: str = "PPO", path: str | Path | None = 
     section = data[env_id]
     if not isinstance(section, dict):
         raise ConfigError(f"{path.name}: the section {env_id!r} must be a mapping of keys to values")
-    merged = {"algo": algo, **section, **(overrides or {})}
+    merged = _deep_merge({"algo": algo, **section}, overrides or {})
     run = {k: v for k, v in merged.items() if k in _RUN_KEYS}
     hyper = {k: v for k, v in merged.items() if k not in _RUN_KEYS}
     for key in ("n_timesteps", "eval_freq", "checkpoint_freq"):
