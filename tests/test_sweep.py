@@ -19,14 +19,16 @@ TINY = ["--n-mu", "3", "--mu-min", "0.4", "--mu-max", "1.0", "--inch-duration", 
 def test_interrupted_sweep_resumes_without_recomputing(tmp_path):
     out = tmp_path / "sw"
     csv_path = out / "inch-friction.csv"
-    # run the real command in a subprocess and interrupt it (SIGINT) once two cells are written
+    # run the real command in a subprocess and kill it (SIGKILL: no clean-up at all) once two
+    # cells are written
     proc = subprocess.Popen([sys.executable, "-m", "soft_snake_gym.cli", "sweep", "inch-friction", "--out",
                              str(out), *TINY], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120
     while time.time() < deadline and len(read_results(csv_path)) < 2 and proc.poll() is None:
         time.sleep(0.02)
-    proc.send_signal(signal.SIGINT)
+    proc.kill()
     proc.communicate(timeout=60)
+    assert proc.returncode == -signal.SIGKILL, "the sweep finished before it could be interrupted"
     first = read_results(csv_path)
     grid = StudyGrid(n_mu=3, mu_s_min=0.4, mu_s_max=1.0, inch_duration=20.0)
     cells = STUDIES["inch-friction"].cells(grid)
