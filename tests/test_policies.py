@@ -152,6 +152,13 @@ def test_gains_load_from_yaml(tmp_path):
     repo_cfg = Path(__file__).resolve().parents[1] / "configs" / "pid.yaml"
     p = CurvaturePID.from_yaml(env, repo_cfg)
     assert (p.params.Kp, p.params.Kd, p.params.Ki, p.params.saturation) == (10.0, 1.0, 5.0, 1.5)
+    for name, cls, env_id in (("pid_soft.yaml", CurvaturePID, "SoftEel-v0"),
+                              ("decentralized.yaml", DecentralizedPhasePID, "SoftEel-v0"),
+                              ("open_loop.yaml", OpenLoopSerpenoid, "SoftEel-v0"),
+                              ("inching.yaml", InchingPID, "SoftWorm-v0")):
+        policy = cls.from_yaml(gym.make(env_id), repo_cfg.parent / name)
+        assert isinstance(policy, cls)
+    assert make_policy("decentralized", env, config=repo_cfg.parent / "decentralized.yaml").params.Kd == 2.0
     bad = tmp_path / "bad.yaml"
     bad.write_text("Kp: 10\nKdd: 1\n")
     with pytest.raises(ConfigError, match="'Kdd'.*'Kd'"):
