@@ -45,8 +45,13 @@ COLUMNS = [
 ]
 
 
-def make_eval_env(env_id: str, n_envs: int = 1, seed: int | None = 0,
-                  env_kwargs: dict[str, Any] | None = None, render_mode: str | None = None):
+def make_eval_env(
+    env_id: str,
+    n_envs: int = 1,
+    seed: int | None = 0,
+    env_kwargs: dict[str, Any] | None = None,
+    render_mode: str | None = None,
+):
     """A ``DummyVecEnv`` of ``Monitor``-wrapped envs, as SB3's evaluation expects."""
     import gymnasium as gym
     from stable_baselines3.common.monitor import Monitor
@@ -65,6 +70,7 @@ def make_eval_env(env_id: str, n_envs: int = 1, seed: int | None = 0,
             env = Monitor(gym.make(env_id, **kwargs))
             env.reset(seed=None if seed is None else seed + rank)
             return env
+
         return make
 
     venv = DummyVecEnv([factory(i) for i in range(n_envs)])
@@ -96,8 +102,9 @@ class EpisodeRecorder:
         on_step: optional ``f(i, info)`` called on every step (for video frames).
     """
 
-    def __init__(self, dt: float, transient: float, error_key: str,
-                 on_step: Callable[[int, dict], None] | None = None) -> None:
+    def __init__(
+        self, dt: float, transient: float, error_key: str, on_step: Callable[[int, dict], None] | None = None
+    ) -> None:
         self.dt, self.transient, self.error_key = dt, transient, error_key
         self.on_step = on_step
         self.episodes: list[dict[str, Any]] = []
@@ -157,8 +164,14 @@ class EpisodeRecorder:
         return out
 
 
-def evaluate(policy: Any, env, episodes: int = 3, transient: float = 2.0,
-             deterministic: bool = True, video: str | Path | None = None) -> list[dict[str, Any]]:
+def evaluate(
+    policy: Any,
+    env,
+    episodes: int = 3,
+    transient: float = 2.0,
+    deterministic: bool = True,
+    video: str | Path | None = None,
+) -> list[dict[str, Any]]:
     """Run ``episodes`` episodes of ``policy`` on the VecEnv ``env`` (see
     :func:`make_eval_env`) with SB3's ``evaluate_policy``; returns one metrics dict per episode.
 
@@ -194,8 +207,15 @@ def evaluate(policy: Any, env, episodes: int = 3, transient: float = 2.0,
     if video is not None:
         env.reset()
         frames.append(env.envs[0].render())
-    evaluate_policy(policy, env, n_eval_episodes=episodes, deterministic=deterministic,
-                    callback=rec, return_episode_rewards=True, warn=False)
+    evaluate_policy(
+        policy,
+        env,
+        n_eval_episodes=episodes,
+        deterministic=deterministic,
+        callback=rec,
+        return_episode_rewards=True,
+        warn=False,
+    )
     if video is not None:
         write_video(frames, video, fps=round(1.0 / (stride * inner.dt)))
     return rec.episodes

@@ -63,21 +63,35 @@ def sweep_heatmaps(study: Any, rows: list[dict[str, Any]], out_dir: str | Path) 
         if finite.size == 0:
             continue
         vmin, vmax = float(finite.min()), float(finite.max())
-        fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels) + 0.8, 3.8), squeeze=False,
-                                 constrained_layout=True)
+        fig, axes = plt.subplots(
+            1, len(panels), figsize=(4.2 * len(panels) + 0.8, 3.8), squeeze=False, constrained_layout=True
+        )
         dx = (xs[1] - xs[0]) / 2 if xs.size > 1 else 0.5
         dy = (ys[1] - ys[0]) / 2 if ys.size > 1 else 0.5
         for ax, panel, z in zip(axes[0], panels, grids, strict=True):
-            im = ax.imshow(np.ma.masked_invalid(z), origin="lower", aspect="auto", cmap="viridis",
-                           vmin=vmin, vmax=vmax,
-                           extent=(xs[0] - dx, xs[-1] + dx, ys[0] - dy, ys[-1] + dy))
+            im = ax.imshow(
+                np.ma.masked_invalid(z),
+                origin="lower",
+                aspect="auto",
+                cmap="viridis",
+                vmin=vmin,
+                vmax=vmax,
+                extent=(xs[0] - dx, xs[-1] + dx, ys[0] - dy, ys[-1] + dy),
+            )
             if z.size <= 100:
                 for iy, y in enumerate(ys):
                     for ix, x in enumerate(xs):
                         if np.isfinite(z[iy, ix]):
                             v = z[iy, ix]
-                            ax.text(x, y, f"{v:.3g}", ha="center", va="center", fontsize=6,
-                                    color="white" if v < (vmin + vmax) / 2 else "black")
+                            ax.text(
+                                x,
+                                y,
+                                f"{v:.3g}",
+                                ha="center",
+                                va="center",
+                                fontsize=6,
+                                color="white" if v < (vmin + vmax) / 2 else "black",
+                            )
                         elif any(r[panel_key] == panel and r[xk] == x and r[yk] == y for r in rows):
                             ax.text(x, y, "fail", ha="center", va="center", fontsize=6, color="red")
             name = f"E_bend = {panel:.3g} Pa" if panel_key == "E_bend" else str(panel)
@@ -93,8 +107,13 @@ def sweep_heatmaps(study: Any, rows: list[dict[str, Any]], out_dir: str | Path) 
     return paths
 
 
-def rollout(env_id: str, policy_spec: str, seconds: float, env_kwargs: dict | None = None,
-            reset_options: dict | None = None) -> dict[str, np.ndarray]:
+def rollout(
+    env_id: str,
+    policy_spec: str,
+    seconds: float,
+    env_kwargs: dict | None = None,
+    reset_options: dict | None = None,
+) -> dict[str, np.ndarray]:
     """Run one episode of a baseline and keep its trajectory.
 
     Returns:
@@ -127,12 +146,19 @@ def rollout(env_id: str, policy_spec: str, seconds: float, env_kwargs: dict | No
         if terminated or truncated:
             break
     env.close()
-    return {"t": np.array(t), "x": np.array(xs), "com": np.array(com), "kappa": np.array(kappa),
-            "error": np.array(err), "u": np.array(u)}
+    return {
+        "t": np.array(t),
+        "x": np.array(xs),
+        "com": np.array(com),
+        "kappa": np.array(kappa),
+        "error": np.array(err),
+        "u": np.array(u),
+    }
 
 
-def swim_snapshots(out: str | Path, policy_spec: str = "pid", settle_cycles: int = 2,
-                   snapshots: int = 12) -> Path:
+def swim_snapshots(
+    out: str | Path, policy_spec: str = "pid", settle_cycles: int = 2, snapshots: int = 12
+) -> Path:
     """Body snapshots over one gait cycle of the thesis gait after ``settle_cycles`` cycles,
     coloured by time, with the head, tail and centre-of-mass traces."""
     plt = _plt()
@@ -140,8 +166,9 @@ def swim_snapshots(out: str | Path, policy_spec: str = "pid", settle_cycles: int
 
     omega = SerpenoidParams().omega
     period = 2 * math.pi / omega
-    tr = rollout("SoftEel-v0", policy_spec, (settle_cycles + 1) * period,
-                 env_kwargs={"reset_noise_scale": 0.0})
+    tr = rollout(
+        "SoftEel-v0", policy_spec, (settle_cycles + 1) * period, env_kwargs={"reset_noise_scale": 0.0}
+    )
     sel = tr["t"] >= settle_cycles * period - 1e-9
     t, x, com = tr["t"][sel], tr["x"][sel], tr["com"][sel]
     fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
@@ -158,8 +185,11 @@ def swim_snapshots(out: str | Path, policy_spec: str = "pid", settle_cycles: int
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.legend(loc="upper left", fontsize=8)
-    ax.set_title(f"SoftEel-v0, {policy_spec}, thesis gait (alpha = pi/6, omega = 2pi/3 rad/s): "
-                 f"cycle {settle_cycles + 1}", fontsize=9)
+    ax.set_title(
+        f"SoftEel-v0, {policy_spec}, thesis gait (alpha = pi/6, omega = 2pi/3 rad/s): "
+        f"cycle {settle_cycles + 1}",
+        fontsize=9,
+    )
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
@@ -174,19 +204,31 @@ def rest_start_options(n_nodes: int = 10) -> dict[str, np.ndarray]:
     from soft_snake_gym.policies.open_loop import SerpenoidParams
 
     p = SerpenoidParams()
-    kd, _ = serpenoid(serpenoid_phase(0.0, n_nodes - 2, p.omega, 2 * math.pi / (n_nodes - 2)), p.omega, p.alpha)
+    kd, _ = serpenoid(
+        serpenoid_phase(0.0, n_nodes - 2, p.omega, 2 * math.pi / (n_nodes - 2)), p.omega, p.alpha
+    )
     return {"kbar": kd}
 
 
-def controller_comparison(out: str | Path, seconds: float = 6.0,
-                          centralized: str = "pid:Kd=2,Ki=1",
-                          decentralized: str = "decentralized") -> tuple[Path, dict[str, float]]:
+def controller_comparison(
+    out: str | Path,
+    seconds: float = 6.0,
+    centralized: str = "pid:Kd=2,Ki=1",
+    decentralized: str = "decentralized",
+) -> tuple[Path, dict[str, float]]:
     """Centralized vs decentralized PID from rest: curvature error, curvature and input per
     node over time. Returns the PNG and the mean error after 2 s of each."""
     plt = _plt()
-    runs = {name: rollout("SoftEel-v0", spec, seconds, env_kwargs={"reset_noise_scale": 0.0},
-                          reset_options=rest_start_options())
-            for name, spec in (("centralized", centralized), ("decentralized", decentralized))}
+    runs = {
+        name: rollout(
+            "SoftEel-v0",
+            spec,
+            seconds,
+            env_kwargs={"reset_noise_scale": 0.0},
+            reset_options=rest_start_options(),
+        )
+        for name, spec in (("centralized", centralized), ("decentralized", decentralized))
+    }
     fig, axes = plt.subplots(3, 2, figsize=(10, 7.5), sharex=True, sharey="row", constrained_layout=True)
     cmap = plt.get_cmap("viridis")
     numbers = {}
@@ -207,9 +249,11 @@ def controller_comparison(out: str | Path, seconds: float = 6.0,
     for ax in axes[2]:
         ax.set_xlabel("time [s]")
     axes[0, 1].legend(fontsize=6, ncol=2, loc="upper right")
-    fig.suptitle("From rest, curvature = desired at t = 0: mean error after 2 s "
-                 f"{numbers['centralized']:.4f} (centralized) vs {numbers['decentralized']:.4f} (decentralized)",
-                 fontsize=9)
+    fig.suptitle(
+        "From rest, curvature = desired at t = 0: mean error after 2 s "
+        f"{numbers['centralized']:.4f} (centralized) vs {numbers['decentralized']:.4f} (decentralized)",
+        fontsize=9,
+    )
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
@@ -229,11 +273,15 @@ def _figures_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="docs/img", help="folder for the PNGs (default docs/img)")
 
 
-@subcommand("figures", "draw the swimming snapshot and centralized-vs-decentralized figures", _figures_arguments)
+@subcommand(
+    "figures", "draw the swimming snapshot and centralized-vs-decentralized figures", _figures_arguments
+)
 def _figures(args: argparse.Namespace) -> int:
     res = make_all_figures(args.out)
     print(f"wrote {res['snapshots']} and {res['comparison']}")
     e = res["comparison_errors"]
-    print(f"mean curvature error after 2 s: centralized {e['centralized']:.4f}, "
-          f"decentralized {e['decentralized']:.4f}")
+    print(
+        f"mean curvature error after 2 s: centralized {e['centralized']:.4f}, "
+        f"decentralized {e['decentralized']:.4f}"
+    )
     return 0

@@ -66,10 +66,18 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
     alphas = sorted({k[0] for k in ol})
     mid = alphas[len(alphas) // 2] if alphas else math.nan
     line = sorted((k[1], v) for k, v in ol.items() if k[0] == mid)
-    ex = f"; at alpha = {mid:.2f} rad open loop goes {line[0][1]:.4f} m/s at omega = {line[0][0]:.2f} and {line[-1][1]:.4f} m/s at {line[-1][0]:.2f} rad/s" if line else ""
-    out.append({"finding": "Speed rises with frequency (swimming, E_bend = 1.87e4 Pa)",
-                "verdict": _verdict(a1 + a1p, t1 + t1p),
-                "numbers": f"speed rises in {a1}/{t1} neighbouring frequency steps open loop, {a1p}/{t1p} with PID{ex}"})
+    ex = (
+        f"; at alpha = {mid:.2f} rad open loop goes {line[0][1]:.4f} m/s at omega = {line[0][0]:.2f} and {line[-1][1]:.4f} m/s at {line[-1][0]:.2f} rad/s"
+        if line
+        else ""
+    )
+    out.append(
+        {
+            "finding": "Speed rises with frequency (swimming, E_bend = 1.87e4 Pa)",
+            "verdict": _verdict(a1 + a1p, t1 + t1p),
+            "numbers": f"speed rises in {a1}/{t1} neighbouring frequency steps open loop, {a1p}/{t1p} with PID{ex}",
+        }
+    )
 
     # 2. at fixed frequency speed peaks at an intermediate amplitude
     inner = total = 0
@@ -82,10 +90,15 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
         i = int(np.argmax([v for _, v in line]))
         inner += 0 < i < len(line) - 1
         peaks.append(f"{w:.2f}: {line[i][0]:.2f}")
-    out.append({"finding": "At fixed frequency, speed peaks at an intermediate amplitude (open loop)",
-                "verdict": _verdict(inner, total),
-                "numbers": f"interior peak at {inner}/{total} frequencies; peak amplitude by omega [rad/s]: alpha [rad] = "
-                           + ", ".join(peaks) + " (cells that self-intersect are excluded)"})
+    out.append(
+        {
+            "finding": "At fixed frequency, speed peaks at an intermediate amplitude (open loop)",
+            "verdict": _verdict(inner, total),
+            "numbers": f"interior peak at {inner}/{total} frequencies; peak amplitude by omega [rad/s]: alpha [rad] = "
+            + ", ".join(peaks)
+            + " (cells that self-intersect are excluded)",
+        }
+    )
 
     # 3. fluid losses rise with amplitude and frequency
     pw = _table(g, "alpha", "omega", "mean_fluid_power", controller="open-loop")
@@ -93,10 +106,18 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
     aw, tw = _pairs_increasing(pw, 1)
     lo = min(pw.items(), key=lambda kv: kv[1]) if pw else None
     hi = max(pw.items(), key=lambda kv: kv[1]) if pw else None
-    rng = f"; from {lo[1]:.3g} W (alpha {lo[0][0]:.2f}, omega {lo[0][1]:.2f}) to {hi[1]:.3g} W (alpha {hi[0][0]:.2f}, omega {hi[0][1]:.2f})" if pw else ""
-    out.append({"finding": "Fluid power rises with amplitude and with frequency (open loop)",
-                "verdict": _verdict(aa + aw, ta + tw),
-                "numbers": f"rises in {aa}/{ta} amplitude steps and {aw}/{tw} frequency steps{rng}"})
+    rng = (
+        f"; from {lo[1]:.3g} W (alpha {lo[0][0]:.2f}, omega {lo[0][1]:.2f}) to {hi[1]:.3g} W (alpha {hi[0][0]:.2f}, omega {hi[0][1]:.2f})"
+        if pw
+        else ""
+    )
+    out.append(
+        {
+            "finding": "Fluid power rises with amplitude and with frequency (open loop)",
+            "verdict": _verdict(aa + aw, ta + tw),
+            "numbers": f"rises in {aa}/{ta} amplitude steps and {aw}/{tw} frequency steps{rng}",
+        }
+    )
 
     # 4. stiffer bodies swim faster open loop
     s = _ok(stiff)
@@ -104,8 +125,13 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
     agree = total = 0
     for a in sorted({r["alpha"] for r in s}):
         for w in sorted({r["omega"] for r in s}):
-            v = [next((r["average_speed"] for r in s if (r["alpha"], r["omega"], r["E_bend"]) == (a, w, e)), None)
-                 for e in es]
+            v = [
+                next(
+                    (r["average_speed"] for r in s if (r["alpha"], r["omega"], r["E_bend"]) == (a, w, e)),
+                    None,
+                )
+                for e in es
+            ]
             for x, y in zip(v, v[1:], strict=False):
                 if x is not None and y is not None:
                     total += 1
@@ -114,9 +140,14 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
     for e in es:
         common = [r["average_speed"] for r in s if r["E_bend"] == e]
         means.append(f"{e:.3g} Pa: median {np.median(common):.4f} m/s" if common else f"{e:.3g} Pa: -")
-    out.append({"finding": "Stiffer bodies swim faster open loop",
-                "verdict": _verdict(agree, total),
-                "numbers": f"speed rises with E_bend in {agree}/{total} stiffness steps at equal gait; " + "; ".join(means)})
+    out.append(
+        {
+            "finding": "Stiffer bodies swim faster open loop",
+            "verdict": _verdict(agree, total),
+            "numbers": f"speed rises with E_bend in {agree}/{total} stiffness steps at equal gait; "
+            + "; ".join(means),
+        }
+    )
 
     # 5. feedback beats open loop on speed and error at low stiffness, at a higher energy cost
     err_ol = _table(g, "alpha", "omega", "curvature_error", controller="open-loop")
@@ -133,15 +164,27 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
     ratio = np.median([pid[k] / ol[k] for k in both if ol[k] > 0]) if both else math.nan
     eratio = np.median([err_pid[k] / err_ol[k] for k in both]) if both else math.nan
     n = len(both)
-    out.append({"finding": "Feedback (PID) swims faster than open loop at low stiffness",
-                "verdict": _verdict(faster, n),
-                "numbers": f"PID faster in {faster}/{n} cells, median speed ratio PID/open loop {ratio:.2f}"})
-    out.append({"finding": "Feedback has a lower curvature error than open loop at low stiffness",
-                "verdict": _verdict(lower_err, n),
-                "numbers": f"PID error lower in {lower_err}/{n} cells, median error ratio PID/open loop {eratio:.2f}"})
-    out.append({"finding": "Feedback costs more energy",
-                "verdict": _verdict(costlier, n),
-                "numbers": f"PID fluid power higher in {costlier}/{n} cells, actuator energy higher in {act_costlier}/{n}"})
+    out.append(
+        {
+            "finding": "Feedback (PID) swims faster than open loop at low stiffness",
+            "verdict": _verdict(faster, n),
+            "numbers": f"PID faster in {faster}/{n} cells, median speed ratio PID/open loop {ratio:.2f}",
+        }
+    )
+    out.append(
+        {
+            "finding": "Feedback has a lower curvature error than open loop at low stiffness",
+            "verdict": _verdict(lower_err, n),
+            "numbers": f"PID error lower in {lower_err}/{n} cells, median error ratio PID/open loop {eratio:.2f}",
+        }
+    )
+    out.append(
+        {
+            "finding": "Feedback costs more energy",
+            "verdict": _verdict(costlier, n),
+            "numbers": f"PID fluid power higher in {costlier}/{n} cells, actuator energy higher in {act_costlier}/{n}",
+        }
+    )
 
     # 6. on land, more static and less kinetic friction go further
     c = [r for r in inch if not r.get("failure")]
@@ -155,16 +198,30 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
     d_ol = _table(c, "mu_s", "mu_d", "distance", controller="inching")
     best = max(d_ol.items(), key=lambda kv: kv[1]) if d_ol else None
     worst = min(d_ol.items(), key=lambda kv: kv[1]) if d_ol else None
-    span = (f"; open loop from {worst[1]:.3f} m (mu_s {worst[0][0]:.2f}, mu_d {worst[0][1]:.2f}) to {best[1]:.3f} m "
-            f"(mu_s {best[0][0]:.2f}, mu_d {best[0][1]:.2f})") if d_ol else ""
-    out.append({"finding": "On land, more static friction goes further",
-                "verdict": _verdict(agree_s, total_s),
-                "numbers": f"distance rises with mu_s in {agree_s}/{total_s} steps at fixed mu_d, "
-                           f"stays level (within 0.5 %) in {ties_s}{span}"})
-    out.append({"finding": "On land, less kinetic friction goes further",
-                "verdict": _verdict(agree_d, total_d),
-                "numbers": f"distance falls with mu_d in {agree_d}/{total_d} steps at fixed mu_s, "
-                           f"stays level in {ties_d}"})
+    span = (
+        (
+            f"; open loop from {worst[1]:.3f} m (mu_s {worst[0][0]:.2f}, mu_d {worst[0][1]:.2f}) to {best[1]:.3f} m "
+            f"(mu_s {best[0][0]:.2f}, mu_d {best[0][1]:.2f})"
+        )
+        if d_ol
+        else ""
+    )
+    out.append(
+        {
+            "finding": "On land, more static friction goes further",
+            "verdict": _verdict(agree_s, total_s),
+            "numbers": f"distance rises with mu_s in {agree_s}/{total_s} steps at fixed mu_d, "
+            f"stays level (within 0.5 %) in {ties_s}{span}",
+        }
+    )
+    out.append(
+        {
+            "finding": "On land, less kinetic friction goes further",
+            "verdict": _verdict(agree_d, total_d),
+            "numbers": f"distance falls with mu_d in {agree_d}/{total_d} steps at fixed mu_s, "
+            f"stays level in {ties_d}",
+        }
+    )
 
     # 7. feedback goes further on land at a higher energy cost
     d_cl = _table(c, "mu_s", "mu_d", "distance", controller="inching-pid")
@@ -175,12 +232,20 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
     dearer = sum(f_cl[k] > f_ol[k] for k in both)
     tot_ol = sum(d_ol[k] for k in both)
     tot_cl = sum(d_cl[k] for k in both)
-    out.append({"finding": "On land, feedback goes further",
-                "verdict": _verdict(further, len(both)),
-                "numbers": f"closed loop further in {further}/{len(both)} cells; summed distance {tot_cl:.3f} m vs {tot_ol:.3f} m open loop"})
-    out.append({"finding": "On land, feedback costs more energy",
-                "verdict": _verdict(dearer, len(both)),
-                "numbers": f"closed-loop friction energy higher in {dearer}/{len(both)} cells"})
+    out.append(
+        {
+            "finding": "On land, feedback goes further",
+            "verdict": _verdict(further, len(both)),
+            "numbers": f"closed loop further in {further}/{len(both)} cells; summed distance {tot_cl:.3f} m vs {tot_ol:.3f} m open loop",
+        }
+    )
+    out.append(
+        {
+            "finding": "On land, feedback costs more energy",
+            "verdict": _verdict(dearer, len(both)),
+            "numbers": f"closed-loop friction energy higher in {dearer}/{len(both)} cells",
+        }
+    )
     return out
 
 
@@ -193,8 +258,10 @@ def write_report(path: Path, img: Path, facts: list[dict[str, str]], extras: dic
 
     rows = "\n".join(f"| {f['finding']} | **{f['verdict']}** | {f['numbers']} |" for f in facts)
     cmp_ = extras["comparison_errors"]
-    timings = "\n".join(f"| {k} | {v['cells']} | {v['cpu']:.0f} | {v['computed']} | {v['seconds']:.0f} |"
-                        for k, v in extras["sweeps"].items())
+    timings = "\n".join(
+        f"| {k} | {v['cells']} | {v['cpu']:.0f} | {v['computed']} | {v['seconds']:.0f} |"
+        for k, v in extras["sweeps"].items()
+    )
     text = f"""# Reproducing the thesis's findings
 
 This page is generated by
@@ -206,7 +273,7 @@ soft-snake reproduce --out docs
 which runs the three parameter studies (`soft-snake sweep all --out docs/img`, resumable: cells
 already in the CSVs are not recomputed), draws the two trajectory figures (`soft-snake figures
 --out docs/img`) and rewrites this file from the CSVs. Every number below comes from those
-CSVs (`docs/img/*.csv`). Defaults: {extras['grid']}.
+CSVs (`docs/img/*.csv`). Defaults: {extras["grid"]}.
 
 Verdicts count comparisons between neighbouring grid cells: **yes** when at least 80 % go the
 way the thesis states, **partly** from 50 %, **no** below. Cells whose body self-intersected
@@ -271,28 +338,28 @@ a rerun with the CSVs in place recomputes nothing and takes about 8 s (the figur
 
 ## Swimming: amplitude × frequency at E_bend = 1.87e4 Pa
 
-{fig('swim-gait_average_speed.png', 'Average speed, open loop (left) and PID (10, 2, 1) (right)')}
-{fig('swim-gait_curvature_error.png', 'Mean curvature error |kappa_des - kappa|')}
-{fig('swim-gait_mean_fluid_power.png', 'Mean power lost to the fluid')}
+{fig("swim-gait_average_speed.png", "Average speed, open loop (left) and PID (10, 2, 1) (right)")}
+{fig("swim-gait_curvature_error.png", "Mean curvature error |kappa_des - kappa|")}
+{fig("swim-gait_mean_fluid_power.png", "Mean power lost to the fluid")}
 
 ## Swimming: open-loop speed for several bending stiffnesses
 
-{fig('swim-stiffness_average_speed.png', 'Open-loop average speed at three bending moduli')}
-{fig('swim-stiffness_mean_fluid_power.png', 'Open-loop fluid power at three bending moduli')}
+{fig("swim-stiffness_average_speed.png", "Open-loop average speed at three bending moduli")}
+{fig("swim-stiffness_mean_fluid_power.png", "Open-loop fluid power at three bending moduli")}
 
 ## Inching: static × kinetic friction
 
-{fig('inch-friction_distance.png', 'Distance in 10 s, open loop (left) and closed loop (right)')}
-{fig('inch-friction_energy_friction.png', 'Energy lost to friction in 10 s')}
-{fig('inch-friction_length_error.png', 'Mean edge-length error |lbar_des - |e||')}
+{fig("inch-friction_distance.png", "Distance in 10 s, open loop (left) and closed loop (right)")}
+{fig("inch-friction_energy_friction.png", "Energy lost to friction in 10 s")}
+{fig("inch-friction_length_error.png", "Mean edge-length error |lbar_des - |e||")}
 
 ## Trajectories
 
-{fig('swim_snapshots.png', 'Swimming snapshots over one gait cycle (PID, thesis gait, default stiffness), coloured by time, with head, tail and centre-of-mass traces')}
-{fig('centralized_vs_decentralized.png', 'Centralized vs decentralized PID from rest with curvature equal to the desired one')}
+{fig("swim_snapshots.png", "Swimming snapshots over one gait cycle (PID, thesis gait, default stiffness), coloured by time, with head, tail and centre-of-mass traces")}
+{fig("centralized_vs_decentralized.png", "Centralized vs decentralized PID from rest with curvature equal to the desired one")}
 
 From rest, with the curvatures equal to the desired ones at t = 0, the mean curvature error
-after 2 s is {cmp_['centralized']:.4f} with the centralized clock and {cmp_['decentralized']:.4f}
+after 2 s is {cmp_["centralized"]:.4f} with the centralized clock and {cmp_["decentralized"]:.4f}
 with the decentralized circulant closure (both with gains (10, 2, 1)); both settle within about
 a second, the decentralized one with a slightly larger error, as the thesis states. With the
 thesis's first gain set (10, 1, 5) the decentralized chain does **not** settle in this model
@@ -318,13 +385,19 @@ def reproduce(out: str | Path = "docs", workers: int | None = None, progress: bo
         cells = STUDIES[name].cells(grid)
         results = read_results(res["csv"])
         rows[name] = [results[cell_key(c)] for c in cells if cell_key(c) in results]
-        sweeps[name] = {"cells": len(cells), "computed": res["computed"], "seconds": time.perf_counter() - t0,
-                        "cpu": sum(r.get("wall_time", 0.0) for r in rows[name])}
+        sweeps[name] = {
+            "cells": len(cells),
+            "computed": res["computed"],
+            "seconds": time.perf_counter() - t0,
+            "cpu": sum(r.get("wall_time", 0.0) for r in rows[name]),
+        }
     extras = make_all_figures(img)
     extras["sweeps"] = sweeps
-    extras["grid"] = (f"alpha {grid.n_alpha} values up to 0.95 x the self-intersection limit, omega {grid.n_omega} "
-                      f"values in [{grid.omega_min}, {grid.omega_max:.3f}] rad/s, E_bend {list(grid.e_bend)} Pa, "
-                      f"mu {grid.n_mu} values in [{grid.mu_s_min}, {grid.mu_s_max}] with mu_d <= mu_s")
+    extras["grid"] = (
+        f"alpha {grid.n_alpha} values up to 0.95 x the self-intersection limit, omega {grid.n_omega} "
+        f"values in [{grid.omega_min}, {grid.omega_max:.3f}] rad/s, E_bend {list(grid.e_bend)} Pa, "
+        f"mu {grid.n_mu} values in [{grid.mu_s_min}, {grid.mu_s_max}] with mu_d <= mu_s"
+    )
     facts = findings(rows["swim-gait"], rows["swim-stiffness"], rows["inch-friction"])
     return write_report(out / "thesis_reproduction.md", img, facts, extras)
 
@@ -338,7 +411,9 @@ def _reproduce_arguments(p: argparse.ArgumentParser) -> None:
     _grid_arguments(p)
 
 
-@subcommand("reproduce", "run all sweeps and figures and write docs/thesis_reproduction.md", _reproduce_arguments)
+@subcommand(
+    "reproduce", "run all sweeps and figures and write docs/thesis_reproduction.md", _reproduce_arguments
+)
 def _reproduce(args: argparse.Namespace) -> int:
     from soft_snake_gym.sweep import grid_from_args
 

@@ -96,12 +96,21 @@ class Study:
             for c in self.controllers:
                 for a in grid.alphas():
                     for w in grid.omegas():
-                        out.append({"controller": c, "alpha": float(a), "omega": float(w), "E_bend": SOFT_E_BEND})
+                        out.append(
+                            {"controller": c, "alpha": float(a), "omega": float(w), "E_bend": SOFT_E_BEND}
+                        )
         elif self.name == "swim-stiffness":
             for e in grid.e_bend:
                 for a in grid.alphas():
                     for w in grid.omegas():
-                        out.append({"controller": "open-loop", "alpha": float(a), "omega": float(w), "E_bend": float(e)})
+                        out.append(
+                            {
+                                "controller": "open-loop",
+                                "alpha": float(a),
+                                "omega": float(w),
+                                "E_bend": float(e),
+                            }
+                        )
         elif self.name == "inch-friction":
             mus = grid.mus()
             for c in self.controllers:
@@ -114,30 +123,53 @@ class Study:
 
 STUDIES: dict[str, Study] = {
     "swim-gait": Study(
-        "swim-gait", "SoftEel-v0", ("alpha", "omega", "E_bend"),
-        (("average_speed", "average speed", "m/s"), ("curvature_error", "curvature error", "-"),
-         ("mean_fluid_power", "fluid power", "W")),
+        "swim-gait",
+        "SoftEel-v0",
+        ("alpha", "omega", "E_bend"),
+        (
+            ("average_speed", "average speed", "m/s"),
+            ("curvature_error", "curvature error", "-"),
+            ("mean_fluid_power", "fluid power", "W"),
+        ),
         "swimming, amplitude x frequency, open loop vs PID (10, 2, 1), E_bend = 1.87e4 Pa",
         ("open-loop", "pid"),
     ),
     "swim-stiffness": Study(
-        "swim-stiffness", "SoftEel-v0", ("alpha", "omega", "E_bend"),
+        "swim-stiffness",
+        "SoftEel-v0",
+        ("alpha", "omega", "E_bend"),
         (("average_speed", "average speed", "m/s"), ("mean_fluid_power", "fluid power", "W")),
         "swimming, open loop, amplitude x frequency for several bending moduli",
         ("open-loop",),
     ),
     "inch-friction": Study(
-        "inch-friction", "SoftWorm-v0", ("mu_s", "mu_d"),
-        (("distance", "distance", "m"), ("energy_friction", "friction energy", "J"),
-         ("length_error", "length error", "m")),
+        "inch-friction",
+        "SoftWorm-v0",
+        ("mu_s", "mu_d"),
+        (
+            ("distance", "distance", "m"),
+            ("energy_friction", "friction energy", "J"),
+            ("length_error", "length error", "m"),
+        ),
         "inching, static x kinetic friction, open loop vs closed loop",
         ("inching", "inching-pid"),
     ),
 }
 
-RESULT_COLUMNS = ("average_speed", "distance", "curvature_error", "length_error", "mean_fluid_power",
-                  "energy_fluid", "energy_friction", "energy_actuator", "cost_of_transport",
-                  "duration", "failure", "wall_time")
+RESULT_COLUMNS = (
+    "average_speed",
+    "distance",
+    "curvature_error",
+    "length_error",
+    "mean_fluid_power",
+    "energy_fluid",
+    "energy_friction",
+    "energy_actuator",
+    "cost_of_transport",
+    "duration",
+    "failure",
+    "wall_time",
+)
 
 
 def cell_key(cell: dict[str, Any]) -> str:
@@ -163,8 +195,11 @@ def run_cell(cell: dict[str, Any], grid: StudyGrid | None = None) -> dict[str, A
         steps = int(round((transient + grid.cycles * period) / 0.01))
         peak_rate = max(alpha * omega / math.cos(alpha / 2) ** 2, 1.5 * alpha * omega)
         env_kwargs = {
-            "rod": {"E_bend": cell["E_bend"]}, "initial_shape": "straight", "reset_noise_scale": 0.0,
-            "max_curvature_rate": max(2 * math.pi, 1.05 * peak_rate), "max_episode_steps": steps,
+            "rod": {"E_bend": cell["E_bend"]},
+            "initial_shape": "straight",
+            "reset_noise_scale": 0.0,
+            "max_curvature_rate": max(2 * math.pi, 1.05 * peak_rate),
+            "max_episode_steps": steps,
         }
         opts = {"alpha": alpha, "omega": omega}
         if cell["controller"] == "pid" and cell["E_bend"] <= 1e5:
@@ -172,7 +207,8 @@ def run_cell(cell: dict[str, Any], grid: StudyGrid | None = None) -> dict[str, A
     else:
         transient = grid.inch_transient
         env_kwargs = {
-            "ground": {"mu_s": cell["mu_s"], "mu_d": cell["mu_d"]}, "reset_noise_scale": 0.0,
+            "ground": {"mu_s": cell["mu_s"], "mu_d": cell["mu_d"]},
+            "reset_noise_scale": 0.0,
             "max_episode_steps": int(round(grid.inch_duration / 0.01)),
         }
         opts = {}
@@ -229,8 +265,14 @@ def _worker(args: tuple[dict[str, Any], StudyGrid]) -> dict[str, Any]:
         return row
 
 
-def run_sweep(study_name: str, out_dir: str | Path, grid: StudyGrid | None = None,
-              workers: int | None = None, progress: bool = True, figures: bool = True) -> dict[str, Any]:
+def run_sweep(
+    study_name: str,
+    out_dir: str | Path,
+    grid: StudyGrid | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+    figures: bool = True,
+) -> dict[str, Any]:
     """Run (or resume) one study; returns ``{"csv", "computed", "skipped", "seconds", "figures"}``.
 
     Args:
@@ -269,8 +311,13 @@ def run_sweep(study_name: str, out_dir: str | Path, grid: StudyGrid | None = Non
             f.flush()
             os.fsync(f.fileno())
 
-        bar = tqdm(total=len(cells), initial=len(cells) - len(pending), desc=study.name,
-                   unit="cell", disable=not progress)
+        bar = tqdm(
+            total=len(cells),
+            initial=len(cells) - len(pending),
+            desc=study.name,
+            unit="cell",
+            disable=not progress,
+        )
         if workers == 1 or len(pending) <= 1:
             for cell in pending:
                 write(_worker((cell, grid)))
@@ -278,8 +325,9 @@ def run_sweep(study_name: str, out_dir: str | Path, grid: StudyGrid | None = Non
         elif pending:
             import multiprocessing as mp
 
-            with ProcessPoolExecutor(max_workers=min(workers, len(pending)),
-                                     mp_context=mp.get_context("spawn")) as pool:
+            with ProcessPoolExecutor(
+                max_workers=min(workers, len(pending)), mp_context=mp.get_context("spawn")
+            ) as pool:
                 futures = [pool.submit(_worker, (cell, grid)) for cell in pending]
                 try:
                     for fut in as_completed(futures):
@@ -297,8 +345,13 @@ def run_sweep(study_name: str, out_dir: str | Path, grid: StudyGrid | None = Non
         results = read_results(path)
         rows = [results[cell_key(c)] for c in cells if cell_key(c) in results]
         pngs = sweep_heatmaps(study, rows, out_dir)
-    return {"csv": path, "computed": len(pending), "skipped": len(cells) - len(pending),
-            "seconds": time.perf_counter() - t0, "figures": pngs}
+    return {
+        "csv": path,
+        "computed": len(pending),
+        "skipped": len(cells) - len(pending),
+        "seconds": time.perf_counter() - t0,
+        "figures": pngs,
+    }
 
 
 def default_grid(**overrides: Any) -> StudyGrid:
@@ -310,25 +363,49 @@ def default_grid(**overrides: Any) -> StudyGrid:
 def _grid_arguments(p: argparse.ArgumentParser) -> None:
     g = StudyGrid()
     p.add_argument("--alpha-min", type=float, help=f"smallest amplitude [rad] (default {g.alpha_min})")
-    p.add_argument("--alpha-max", type=float,
-                   help="largest amplitude [rad] (default 0.95 x the self-intersection limit, 1.52)")
+    p.add_argument(
+        "--alpha-max",
+        type=float,
+        help="largest amplitude [rad] (default 0.95 x the self-intersection limit, 1.52)",
+    )
     p.add_argument("--n-alpha", type=int, help=f"amplitudes in the grid (default {g.n_alpha})")
     p.add_argument("--omega-min", type=float, help=f"smallest frequency [rad/s] (default {g.omega_min})")
     p.add_argument("--omega-max", type=float, help="largest frequency [rad/s] (default pi)")
     p.add_argument("--n-omega", type=int, help=f"frequencies in the grid (default {g.n_omega})")
-    p.add_argument("--e-bend", type=float, nargs="+", help="bending moduli of swim-stiffness [Pa] "
-                   f"(default {' '.join(f'{e:g}' for e in g.e_bend)})")
-    p.add_argument("--mu-min", type=float, dest="mu_s_min", help=f"smallest friction coefficient (default {g.mu_s_min})")
-    p.add_argument("--mu-max", type=float, dest="mu_s_max", help=f"largest friction coefficient (default {g.mu_s_max})")
+    p.add_argument(
+        "--e-bend",
+        type=float,
+        nargs="+",
+        help=f"bending moduli of swim-stiffness [Pa] (default {' '.join(f'{e:g}' for e in g.e_bend)})",
+    )
+    p.add_argument(
+        "--mu-min", type=float, dest="mu_s_min", help=f"smallest friction coefficient (default {g.mu_s_min})"
+    )
+    p.add_argument(
+        "--mu-max", type=float, dest="mu_s_max", help=f"largest friction coefficient (default {g.mu_s_max})"
+    )
     p.add_argument("--n-mu", type=int, help=f"friction coefficients per axis (default {g.n_mu})")
     p.add_argument("--cycles", type=int, help=f"gait cycles averaged per swimming cell (default {g.cycles})")
-    p.add_argument("--inch-duration", type=float, help=f"inching episode length [s] (default {g.inch_duration})")
+    p.add_argument(
+        "--inch-duration", type=float, help=f"inching episode length [s] (default {g.inch_duration})"
+    )
 
 
 def grid_from_args(args: argparse.Namespace) -> StudyGrid:
     """The :class:`StudyGrid` of the grid options, validated."""
-    keys = ("alpha_min", "alpha_max", "n_alpha", "omega_min", "omega_max", "n_omega", "mu_s_min",
-            "mu_s_max", "n_mu", "cycles", "inch_duration")
+    keys = (
+        "alpha_min",
+        "alpha_max",
+        "n_alpha",
+        "omega_min",
+        "omega_max",
+        "n_omega",
+        "mu_s_min",
+        "mu_s_max",
+        "n_mu",
+        "cycles",
+        "inch_duration",
+    )
     kw = {k: getattr(args, k) for k in keys}
     if args.e_bend:
         kw["e_bend"] = tuple(args.e_bend)
@@ -337,9 +414,13 @@ def grid_from_args(args: argparse.Namespace) -> StudyGrid:
         if getattr(grid, k) < 1:
             raise CLIError(f"--{k.replace('_', '-')} {getattr(grid, k)} must be at least 1")
     if grid.omega_min <= 0 or grid.omega_max < grid.omega_min:
-        raise CLIError(f"frequencies need 0 < --omega-min <= --omega-max, got {grid.omega_min}, {grid.omega_max}")
+        raise CLIError(
+            f"frequencies need 0 < --omega-min <= --omega-max, got {grid.omega_min}, {grid.omega_max}"
+        )
     if grid.alpha_min <= 0 or (grid.alpha_max is not None and grid.alpha_max < grid.alpha_min):
-        raise CLIError(f"amplitudes need 0 < --alpha-min <= --alpha-max, got {grid.alpha_min}, {grid.alpha_max}")
+        raise CLIError(
+            f"amplitudes need 0 < --alpha-min <= --alpha-max, got {grid.alpha_min}, {grid.alpha_max}"
+        )
     if grid.mu_s_min < 0 or grid.mu_s_max < grid.mu_s_min:
         raise CLIError(f"friction needs 0 <= --mu-min <= --mu-max, got {grid.mu_s_min}, {grid.mu_s_max}")
     if any(e <= 0 for e in grid.e_bend):
@@ -361,6 +442,8 @@ def _sweep(args: argparse.Namespace) -> int:
     names: Iterable[str] = STUDIES if args.study == "all" else [args.study]
     for name in names:
         res = run_sweep(name, args.out, grid, workers=args.workers, progress=not args.no_progress)
-        print(f"{name}: {res['computed']} cells computed, {res['skipped']} resumed from {res['csv']} "
-              f"in {res['seconds']:.1f} s; figures: {', '.join(str(p) for p in res['figures'])}")
+        print(
+            f"{name}: {res['computed']} cells computed, {res['skipped']} resumed from {res['csv']} "
+            f"in {res['seconds']:.1f} s; figures: {', '.join(str(p) for p in res['figures'])}"
+        )
     return 0

@@ -22,8 +22,21 @@ def run(capsys, *argv):
 
 def test_evaluate_prints_the_table_and_writes_json(capsys, tmp_path):
     path = tmp_path / "pid.json"
-    code, out, err = run(capsys, "evaluate", "SoftEel-v0", "--policy", "pid:alpha=0.5,omega=2.1",
-                         "--episodes", "2", "--max-steps", "150", "--transient", "0.5", "--json", str(path))
+    code, out, err = run(
+        capsys,
+        "evaluate",
+        "SoftEel-v0",
+        "--policy",
+        "pid:alpha=0.5,omega=2.1",
+        "--episodes",
+        "2",
+        "--max-steps",
+        "150",
+        "--transient",
+        "0.5",
+        "--json",
+        str(path),
+    )
     assert code == 0, err
     for label in ("return", "average speed", "curvature error", "fluid power", "cost of transport"):
         assert label in out
@@ -35,16 +48,38 @@ def test_evaluate_prints_the_table_and_writes_json(capsys, tmp_path):
 
 
 def test_evaluate_worm_table(capsys):
-    code, out, err = run(capsys, "evaluate", "SoftWorm-v0", "--policy", "inching-pid", "--episodes", "1",
-                         "--max-steps", "200", "--transient", "0.5")
+    code, out, err = run(
+        capsys,
+        "evaluate",
+        "SoftWorm-v0",
+        "--policy",
+        "inching-pid",
+        "--episodes",
+        "1",
+        "--max-steps",
+        "200",
+        "--transient",
+        "0.5",
+    )
     assert code == 0, err
     assert "length error" in out and "friction energy" in out and "curvature error" not in out
 
 
 def test_evaluate_records_a_video(capsys, tmp_path):
     path = tmp_path / "eel.gif"
-    code, out, err = run(capsys, "evaluate", "SoftEel-v0", "--policy", "open-loop", "--episodes", "1",
-                         "--max-steps", "12", "--video", str(path))
+    code, out, err = run(
+        capsys,
+        "evaluate",
+        "SoftEel-v0",
+        "--policy",
+        "open-loop",
+        "--episodes",
+        "1",
+        "--max-steps",
+        "12",
+        "--video",
+        str(path),
+    )
     assert code == 0, err
     from PIL import Image
 
@@ -57,12 +92,30 @@ def test_evaluate_a_trained_model_and_reject_it_on_the_other_env(capsys, tmp_pat
 
     model = PPO("MlpPolicy", gym.make("SoftEel-v0"), n_steps=64, batch_size=64, seed=0)
     model.save(tmp_path / "eel_ppo")
-    code, out, err = run(capsys, "evaluate", "SoftEel-v0", "--policy", str(tmp_path / "eel_ppo.zip"),
-                         "--episodes", "1", "--max-steps", "20")
+    code, out, err = run(
+        capsys,
+        "evaluate",
+        "SoftEel-v0",
+        "--policy",
+        str(tmp_path / "eel_ppo.zip"),
+        "--episodes",
+        "1",
+        "--max-steps",
+        "20",
+    )
     assert code == 0, err
     assert "curvature error" in out and "n/a" in out  # a model has no reference gait
-    code, out, err = run(capsys, "evaluate", "SoftWorm-v0", "--policy", str(tmp_path / "eel_ppo.zip"),
-                         "--episodes", "1", "--max-steps", "20")
+    code, out, err = run(
+        capsys,
+        "evaluate",
+        "SoftWorm-v0",
+        "--policy",
+        str(tmp_path / "eel_ppo.zip"),
+        "--episodes",
+        "1",
+        "--max-steps",
+        "20",
+    )
     assert code == 2 and "trained on observations" in err
 
 
@@ -88,8 +141,9 @@ def test_bad_options_are_one_line_errors(capsys, argv, message):
 
 def test_installed_console_script_errors_without_traceback():
     exe = shutil.which("soft-snake") or str(__import__("pathlib").Path(sys.executable).parent / "soft-snake")
-    proc = subprocess.run([exe, "evaluate", "SoftWorm-v0", "--policy", "pid"], capture_output=True, text=True,
-                          timeout=120)
+    proc = subprocess.run(
+        [exe, "evaluate", "SoftWorm-v0", "--policy", "pid"], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 2
     assert proc.stderr.strip().startswith("soft-snake evaluate: error: policy 'pid' controls curvature")
     assert len(proc.stderr.strip().splitlines()) == 1

@@ -119,8 +119,9 @@ def test_inching_pid_tracks_length_better_than_open_loop():
     assert cl["length_error"] < ol["length_error"]
 
 
-@pytest.mark.parametrize(("spec", "env_id"), [("pid", "SoftWorm-v0"), ("decentralized", "SoftWorm-v0"),
-                                              ("inching", "SoftEel-v0")])
+@pytest.mark.parametrize(
+    ("spec", "env_id"), [("pid", "SoftWorm-v0"), ("decentralized", "SoftWorm-v0"), ("inching", "SoftEel-v0")]
+)
 def test_policy_for_the_wrong_env_is_rejected(spec, env_id):
     with pytest.raises(PolicyEnvMismatch, match="SoftWorm-v0|SoftEel-v0"):
         make_policy(spec, gym.make(env_id))
@@ -128,8 +129,13 @@ def test_policy_for_the_wrong_env_is_rejected(spec, env_id):
 
 def test_spec_parsing_and_errors():
     assert parse_policy_spec("pid:alpha=pi/6,omega=2*pi/3,closure=pacemaker") == (
-        "pid", {"alpha": pytest.approx(math.pi / 6), "omega": pytest.approx(2 * math.pi / 3),
-                "closure": "pacemaker"})
+        "pid",
+        {
+            "alpha": pytest.approx(math.pi / 6),
+            "omega": pytest.approx(2 * math.pi / 3),
+            "closure": "pacemaker",
+        },
+    )
     env = gym.make("SoftEel-v0")
     p = make_policy("pid:alpha=0.5,omega=2.1,Kd=2", env)
     assert isinstance(p, CurvaturePID) and (p.params.alpha, p.params.omega, p.params.Kd) == (0.5, 2.1, 2.0)
@@ -141,8 +147,13 @@ def test_spec_parsing_and_errors():
         make_policy("pid:Kp=-1", env)
     with pytest.raises(ConfigError, match="does not exist"):
         make_policy("models/nope.zip", env)
-    assert set(BASELINES.values()) == {OpenLoopSerpenoid, CurvaturePID, DecentralizedPhasePID,
-                                       InchingWave, InchingPID}
+    assert set(BASELINES.values()) == {
+        OpenLoopSerpenoid,
+        CurvaturePID,
+        DecentralizedPhasePID,
+        InchingWave,
+        InchingPID,
+    }
 
 
 def test_gains_load_from_yaml(tmp_path):
@@ -152,10 +163,12 @@ def test_gains_load_from_yaml(tmp_path):
     repo_cfg = Path(__file__).resolve().parents[1] / "configs" / "pid.yaml"
     p = CurvaturePID.from_yaml(env, repo_cfg)
     assert (p.params.Kp, p.params.Kd, p.params.Ki, p.params.saturation) == (10.0, 1.0, 5.0, 1.5)
-    for name, cls, env_id in (("pid_soft.yaml", CurvaturePID, "SoftEel-v0"),
-                              ("decentralized.yaml", DecentralizedPhasePID, "SoftEel-v0"),
-                              ("open_loop.yaml", OpenLoopSerpenoid, "SoftEel-v0"),
-                              ("inching.yaml", InchingPID, "SoftWorm-v0")):
+    for name, cls, env_id in (
+        ("pid_soft.yaml", CurvaturePID, "SoftEel-v0"),
+        ("decentralized.yaml", DecentralizedPhasePID, "SoftEel-v0"),
+        ("open_loop.yaml", OpenLoopSerpenoid, "SoftEel-v0"),
+        ("inching.yaml", InchingPID, "SoftWorm-v0"),
+    ):
         policy = cls.from_yaml(gym.make(env_id), repo_cfg.parent / name)
         assert isinstance(policy, cls)
     assert make_policy("decentralized", env, config=repo_cfg.parent / "decentralized.yaml").params.Kd == 2.0

@@ -12,8 +12,19 @@ import numpy as np
 
 from soft_snake_gym.sweep import STUDIES, StudyGrid, cell_key, read_results, run_sweep
 
-TINY = ["--n-mu", "3", "--mu-min", "0.4", "--mu-max", "1.0", "--inch-duration", "20", "--workers", "1",
-        "--no-progress"]
+TINY = [
+    "--n-mu",
+    "3",
+    "--mu-min",
+    "0.4",
+    "--mu-max",
+    "1.0",
+    "--inch-duration",
+    "20",
+    "--workers",
+    "1",
+    "--no-progress",
+]
 
 
 def test_interrupted_sweep_resumes_without_recomputing(tmp_path):
@@ -21,8 +32,12 @@ def test_interrupted_sweep_resumes_without_recomputing(tmp_path):
     csv_path = out / "inch-friction.csv"
     # run the real command in a subprocess and kill it (SIGKILL: no clean-up at all) once two
     # cells are written
-    proc = subprocess.Popen([sys.executable, "-m", "soft_snake_gym.cli", "sweep", "inch-friction", "--out",
-                             str(out), *TINY], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "soft_snake_gym.cli", "sweep", "inch-friction", "--out", str(out), *TINY],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.time() + 120
     while time.time() < deadline and len(read_results(csv_path)) < 2 and proc.poll() is None:
         time.sleep(0.02)
@@ -57,8 +72,9 @@ def test_interrupted_sweep_resumes_without_recomputing(tmp_path):
 
 
 def test_parallel_swim_cells_match_serial(tmp_path):
-    grid = StudyGrid(n_alpha=1, alpha_min=0.5, alpha_max=0.5, n_omega=2, omega_min=2.0, omega_max=3.0,
-                     cycles=1)
+    grid = StudyGrid(
+        n_alpha=1, alpha_min=0.5, alpha_max=0.5, n_omega=2, omega_min=2.0, omega_max=3.0, cycles=1
+    )
     par = run_sweep("swim-gait", tmp_path / "par", grid, workers=2, progress=False, figures=False)
     ser = run_sweep("swim-gait", tmp_path / "ser", grid, workers=1, progress=False, figures=False)
     assert par["computed"] == ser["computed"] == 4
@@ -77,14 +93,43 @@ def test_findings_count_comparisons_the_way_the_thesis_states():
         for a in (0.2, 0.6, 1.0):
             for w in (1.0, 2.0):
                 speed = gain * w * a * (1.2 - a)  # rises with omega, peaks inside the alpha range
-                gait.append({"controller": ctrl, "alpha": a, "omega": w, "average_speed": speed,
-                             "curvature_error": 0.1 / gain, "mean_fluid_power": gain * a * w,
-                             "energy_actuator": gain * a * w, "failure": ""})
-    stiff = [{"controller": "open-loop", "alpha": 0.5, "omega": 1.0, "E_bend": e, "average_speed": s,
-              "failure": ""} for e, s in ((1e4, 0.01), (1e5, 0.02), (1e6, 0.03))]
-    inch = [{"controller": c, "mu_s": ms, "mu_d": md, "distance": k * (ms - md + 1), "energy_friction": k * md,
-             "failure": ""} for c, k in (("inching", 1.0), ("inching-pid", 2.0))
-            for ms in (0.4, 0.8) for md in (0.4, 0.8) if md <= ms]
+                gait.append(
+                    {
+                        "controller": ctrl,
+                        "alpha": a,
+                        "omega": w,
+                        "average_speed": speed,
+                        "curvature_error": 0.1 / gain,
+                        "mean_fluid_power": gain * a * w,
+                        "energy_actuator": gain * a * w,
+                        "failure": "",
+                    }
+                )
+    stiff = [
+        {
+            "controller": "open-loop",
+            "alpha": 0.5,
+            "omega": 1.0,
+            "E_bend": e,
+            "average_speed": s,
+            "failure": "",
+        }
+        for e, s in ((1e4, 0.01), (1e5, 0.02), (1e6, 0.03))
+    ]
+    inch = [
+        {
+            "controller": c,
+            "mu_s": ms,
+            "mu_d": md,
+            "distance": k * (ms - md + 1),
+            "energy_friction": k * md,
+            "failure": "",
+        }
+        for c, k in (("inching", 1.0), ("inching-pid", 2.0))
+        for ms in (0.4, 0.8)
+        for md in (0.4, 0.8)
+        if md <= ms
+    ]
     verdicts = {f["finding"]: f["verdict"] for f in findings(gait, stiff, inch)}
     assert set(verdicts.values()) == {"yes"}, verdicts
     # flip one trend and its verdict must change

@@ -222,13 +222,15 @@ class BaselinePolicy:
         return (action[0] if single else action), state
 
     def __repr__(self) -> str:
-        args = ", ".join(f"{f.name}={getattr(self.params, f.name)!r}"
-                         for f in dataclasses.fields(self.params))
+        args = ", ".join(
+            f"{f.name}={getattr(self.params, f.name)!r}" for f in dataclasses.fields(self.params)
+        )
         return f"{type(self).__name__}({args})"
 
 
-def check_params(params: Any, name: str, positive: tuple[str, ...] = (),
-                 nonnegative: tuple[str, ...] = ()) -> None:
+def check_params(
+    params: Any, name: str, positive: tuple[str, ...] = (), nonnegative: tuple[str, ...] = ()
+) -> None:
     """Raise ConfigError naming a field that must be (strictly) positive."""
     for f in positive:
         v = getattr(params, f)

@@ -103,8 +103,9 @@ class InchingWave(BaselinePolicy):
     def desired(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(lbar_des, lbar_dot_des)`` at times t (n_envs,), each (n_envs, N-1)."""
         p = self.params
-        out = [length_wave(ti, self.n_outputs, self.l0, p.eps, p.omega, self.delta_l, p.direction)
-               for ti in t]
+        out = [
+            length_wave(ti, self.n_outputs, self.l0, p.eps, p.omega, self.delta_l, p.direction) for ti in t
+        ]
         return np.array([o[0] for o in out]), np.array([o[1] for o in out])
 
     def _control(self, obs, state):

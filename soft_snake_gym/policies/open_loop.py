@@ -56,9 +56,7 @@ class _SerpenoidPolicy(BaselinePolicy):
     def clock_phase(self, t: np.ndarray) -> np.ndarray:
         """Centralized phases ``omega t + delta j + psi0``, (n_envs, N-2) [rad]."""
         p = self.params
-        return serpenoid_phase(0.0, self.n_outputs, 0.0, self.delta, p.psi0)[None, :] + (
-            p.omega * t[:, None]
-        )
+        return serpenoid_phase(0.0, self.n_outputs, 0.0, self.delta, p.psi0)[None, :] + (p.omega * t[:, None])
 
     def desired(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(kappa_des, kappa_dot_des)`` at phases psi advancing at omega."""

@@ -35,8 +35,15 @@ class PIDParams(SerpenoidParams):
             raise ValueError(f"saturation = {self.saturation!r} must be > 0 (|u| <= saturation alpha omega)")
 
 
-def pid_law(p: PIDParams, dt: float, kappa: np.ndarray, kappa_dot: np.ndarray,
-            kappa_des: np.ndarray, kappa_dot_des: np.ndarray, integral: np.ndarray) -> np.ndarray:
+def pid_law(
+    p: PIDParams,
+    dt: float,
+    kappa: np.ndarray,
+    kappa_dot: np.ndarray,
+    kappa_des: np.ndarray,
+    kappa_dot_des: np.ndarray,
+    integral: np.ndarray,
+) -> np.ndarray:
     """``u = kappa_dot_des + Kp e + Kd e_dot + Ki int e``, saturated (MODEL.md §7).
 
     Updates ``integral`` in place (rectangle rule, before use); all arrays (n_envs, N-2).
@@ -66,9 +73,14 @@ class CurvaturePID(_SerpenoidPolicy):
         kappa = self.block(obs, "kappa")
         kappa_des, kappa_dot_des = self.desired(self.clock_phase(t))
         integral = state[:, 1:]
-        u = pid_law(self.params, self.layout.dt, kappa, self.block(obs, "kappa_dot"),
-                    kappa_des, kappa_dot_des, integral)
+        u = pid_law(
+            self.params,
+            self.layout.dt,
+            kappa,
+            self.block(obs, "kappa_dot"),
+            kappa_des,
+            kappa_dot_des,
+            integral,
+        )
         state[:, 0] = t + self.layout.dt
         return u, np.abs(kappa_des - kappa)
-
-
