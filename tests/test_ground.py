@@ -74,3 +74,23 @@ def test_traveling_length_wave_moves_the_worm_with_the_wave():
     assert backward < -2e-3
     assert abs(sim.com[1]) < 1e-9  # a straight worm stays on its line
     assert sim.friction_work > 0 and sim.actuator_energy > 0
+
+
+def test_friction_never_gives_more_than_static_friction_impulse():
+    """Internal forces cancel, so the body's momentum changes only by friction: per step at
+    most mu_s * M * g * dt, however violently the worm actuates. A node held stuck through a
+    whole step against larger forces would break this."""
+    sim = Simulator(SimConfig(medium="ground"))
+    rng = np.random.default_rng(11)
+    M, h = sim.masses.sum(), sim.h
+    bound = G.mu_s * M * G.g * h
+    worst = 0.0
+    lo, hi = 0.5 * 0.18, 1.5 * 0.18
+    for _ in range(400):
+        u_l = rng.choice([-0.3, 0.3], size=9) * rng.uniform(0.5, 1.0, size=9)
+        u_l = np.clip(u_l, (lo - sim.lbar) / h, (hi - sim.lbar) / h)
+        p0 = sim.masses @ sim.v
+        assert sim.step(u_l=u_l), sim.failure
+        worst = max(worst, np.linalg.norm(sim.masses @ sim.v - p0) / bound)
+    assert worst <= 1.0 + 1e-6
+    assert worst > 0.3  # the test really loads the friction

@@ -493,6 +493,26 @@ def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
 
 
 @njit(cache=True, error_model="numpy")
+def _release_overloaded(buf, ibuf, prm, n):
+    """Stuck nodes whose other forces (``buf[B_F]``, at the current iterate) exceed
+    ``mu_s F_N`` break away with kinetic friction against those forces; True if any did."""
+    F, m, fbrk = buf[B_F], buf[B_M], buf[B_FBRK]
+    state = ibuf[I_FRICTION]
+    released = False
+    for i in range(n // 2):
+        if state[i] != STUCK:
+            continue
+        fn = m[2 * i] * prm[P_G]
+        fo = math.hypot(F[2 * i], F[2 * i + 1])
+        if fo > prm[P_MUS] * fn:
+            state[i] = BREAKAWAY
+            fbrk[2 * i] = -prm[P_MUD] * fn * F[2 * i] / fo
+            fbrk[2 * i + 1] = -prm[P_MUD] * fn * F[2 * i + 1] / fo
+            released = True
+    return released
+
+
+@njit(cache=True, error_model="numpy")
 def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     """One backward-Euler step by damped Newton on the banded analytic Jacobian (MODEL.md §5a).
     Returns (status, iterations, residual, fluid power, friction power)."""
@@ -517,7 +537,15 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
             v[i] = 2.0 * v[i] - v_prev
     norm2, rmax, p_fluid, p_fric = _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, True)
     it = 0
-    while rmax > tol:
+    while True:
+        if rmax <= tol:
+            # stick-slip consistent at the end of the step: a node held stuck against more
+            # than static friction breaks away, and the step is solved again (each node goes
+            # sliding -> stuck -> breakaway at most once, so this ends)
+            if medium != MEDIUM_GROUND or not _release_overloaded(buf, ibuf, prm, n):
+                break
+            norm2, rmax, p_fluid, p_fric = _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, True)
+            continue
         if it == maxit or not math.isfinite(norm2):
             return NOT_CONVERGED, it, rmax, p_fluid, p_fric
         it += 1
