@@ -458,6 +458,21 @@ def _git_commit() -> str | None:
         return None
 
 
+def _record_resume(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> None:
+    """Append the resuming command to command.txt; if the settings changed (a curriculum:
+    ``--resume DIR --hyperparams ...``), keep the earlier config.yaml as config.<k>.yaml."""
+    with open(run_dir / "command.txt", "a") as fh:
+        fh.write(shlex.join(command if command is not None else sys.argv) + "\n")
+    new = yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False)
+    path = run_dir / "config.yaml"
+    if path.is_file() and path.read_text() != new:
+        k = 1
+        while (run_dir / f"config.{k}.yaml").exists():
+            k += 1
+        path.rename(run_dir / f"config.{k}.yaml")
+    path.write_text(new)
+
+
 def _write_run_files(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> None:
     import gymnasium
     import stable_baselines3
@@ -523,6 +538,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress:
                 "start a new run without --resume"
             )
         model_path, stats_path = found
+        _record_resume(cfg, run_dir, command)
         env = make_train_env(cfg, seed=cfg.seed + 7919 * (1 + int(model_path.stem.split("_")[1])))
         if cfg.normalize:
             if stats_path is None:

@@ -63,9 +63,15 @@ def test_evaluate_loads_the_run_and_resume_continues_it(trained_run):
     out = cli("evaluate", "SoftEel-v0", "--policy", str(trained_run), "--episodes", "1", "--max-steps", "100")
     assert out.returncode == 0, out.stderr
     assert "average speed" in out.stdout and "cost of transport" in out.stdout
-    out = cli("train", "--resume", str(trained_run), "--n-timesteps", "384", "--no-progress")
+    out = cli("train", "--resume", str(trained_run), "--n-timesteps", "384", "--no-progress",
+              "--hyperparams", "env_kwargs.energy_cost_weight=0.01")
     assert out.returncode == 0, out.stderr
     assert "(resumed)" in out.stdout
+    # a curriculum step is recorded: the new settings, the earlier ones, both commands
+    assert load_train_config("SoftEel-v0", path=trained_run / "config.yaml").env_kwargs == {
+        "max_episode_steps": 100, "energy_cost_weight": 0.01}
+    assert (trained_run / "config.1.yaml").is_file()
+    assert len((trained_run / "command.txt").read_text().splitlines()) == 2
     assert (trained_run / "checkpoints" / "model_384_steps.zip").is_file()
     assert (trained_run / "progress.1.csv").is_file()  # the first part's log is kept
     with open(trained_run / "learning_curve.csv") as fh:
