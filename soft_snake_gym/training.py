@@ -354,7 +354,9 @@ def latest_checkpoint(run_dir: Path) -> tuple[Path, Path | None] | None:
 
 
 # --- callbacks ------------------------------------------------------------------------------
-def _make_callbacks(cfg: TrainConfig, run_dir: Path, train_env):
+def _make_callbacks(cfg: TrainConfig, run_dir: Path, train_env, stage_start: int = 0):
+    """Checkpoints and the baseline evaluation; the best model is the best evaluation since
+    ``stage_start`` (returns of a curriculum's earlier stages used other rewards)."""
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
     from soft_snake_gym.evaluation import evaluate, make_eval_env, summarize
@@ -387,8 +389,9 @@ def _make_callbacks(cfg: TrainConfig, run_dir: Path, train_env):
             if self.csv.is_file():  # resumed: keep the best so far and the baseline line
                 with open(self.csv) as fh:
                     rows = list(csv.DictReader(fh))
-                if rows:
-                    self.best = max(float(r["return_mean"]) for r in rows)
+                stage = [float(r["return_mean"]) for r in rows if int(r["timesteps"]) > stage_start]
+                if stage:
+                    self.best = max(stage)
 
         def _score(self, policy) -> dict[str, tuple[float, float]]:
             self.env.seed(cfg.eval_seed)
@@ -458,9 +461,10 @@ def _git_commit() -> str | None:
         return None
 
 
-def _record_resume(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> None:
+def _record_resume(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> bool:
     """Append the resuming command to command.txt; if the settings changed (a curriculum:
-    ``--resume DIR --hyperparams ...``), keep the earlier config.yaml as config.<k>.yaml."""
+    ``--resume DIR --hyperparams ...``), keep the earlier config.yaml as config.<k>.yaml and
+    return True (a new stage begins)."""
     with open(run_dir / "command.txt", "a") as fh:
         fh.write(shlex.join(command if command is not None else sys.argv) + "\n")
     new = yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False)
@@ -470,7 +474,10 @@ def _record_resume(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -
         while (run_dir / f"config.{k}.yaml").exists():
             k += 1
         path.rename(run_dir / f"config.{k}.yaml")
+        path.write_text(new)
+        return True
     path.write_text(new)
+    return False
 
 
 def _write_run_files(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> None:
@@ -538,7 +545,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress:
                 "start a new run without --resume"
             )
         model_path, stats_path = found
-        _record_resume(cfg, run_dir, command)
+        new_stage = _record_resume(cfg, run_dir, command)
         env = make_train_env(cfg, seed=cfg.seed + 7919 * (1 + int(model_path.stem.split("_")[1])))
         if cfg.normalize:
             if stats_path is None:
@@ -546,7 +553,9 @@ def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress:
             env = VecNormalize.load(str(stats_path), env)
         model = algo.load(model_path, env=env, device="cpu")
         remaining = cfg.n_timesteps - model.num_timesteps
+        stage_start = model.num_timesteps if new_stage else 0
     else:
+        stage_start = 0
         if run_dir.exists() and any(run_dir.iterdir()):
             raise ConfigError(
                 f"run folder {str(run_dir)!r} already exists and is not empty; "
@@ -563,7 +572,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress:
             raise ConfigError(f"{cfg.algo} rejected the configuration: {err}") from None
         remaining = cfg.n_timesteps
     model.set_logger(_make_logger(run_dir))
-    callbacks = _make_callbacks(cfg, run_dir, env)
+    callbacks = _make_callbacks(cfg, run_dir, env, stage_start)
     try:
         if remaining > 0:
             model.learn(remaining, callback=callbacks, reset_num_timesteps=not resume,
@@ -674,3 +683,43 @@ def _register() -> None:
 
 
 _register()
+
+
+def plot_learning_curve(run_dir: str | Path, out: str | Path | None = None) -> Path:
+    """Plot a run's learning_curve.csv: the agent's average speed and cost of transport
+    (mean ± std over the evaluation episodes) against environment steps, with the baseline's
+    figures on the same seeds as horizontal lines. Written next to the CSV by default."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    run_dir = Path(run_dir)
+    with open(run_dir / "learning_curve.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    if not rows:
+        raise ConfigError(f"{run_dir / 'learning_curve.csv'} has no evaluations yet")
+    cfg = load_train_config(next(iter(load_yaml(run_dir / "config.yaml"))), path=run_dir / "config.yaml")
+    steps = np.array([int(r["timesteps"]) for r in rows])
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for ax, key, label in ((axes[0], "average_speed", "average speed [m/s]"),
+                           (axes[1], "cost_of_transport", "cost of transport [-]")):
+        mean = np.array([float(r[f"{key}_mean"]) for r in rows])
+        std = np.array([float(r[f"{key}_std"]) for r in rows])
+        ax.plot(steps, mean, "o-", ms=3, label=f"{cfg.algo} agent")
+        ax.fill_between(steps, mean - std, mean + std, alpha=0.25)
+        if f"baseline_{key}" in rows[0]:
+            ax.axhline(float(rows[0][f"baseline_{key}"]), color="C3", ls="--",
+                       label=f"baseline ({cfg.baseline_spec})")
+        ax.set_xlabel("environment steps")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        ax.legend()
+    axes[1].set_ylim(bottom=0)
+    fig.suptitle(f"{cfg.env_id}: evaluation on {cfg.eval_episodes} fixed seeds every {cfg.eval_freq} steps")
+    fig.tight_layout()
+    out = Path(out) if out is not None else run_dir / "learning_curve.png"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

@@ -1,0 +1,67 @@
+"""Train the agents shipped in soft_snake_gym/zoo and write the figures of docs/training.md.
+
+Runs the exact commands recorded in the run folders (the eel with a two-stage energy
+curriculum, the worm in one stage), copies each final model with its VecNormalize
+statistics and config into the package, plots the learning curves, and compares the shipped
+agents with the baselines on 10 seeds.
+
+    python training/make_zoo.py                 # everything (about 40 min on 2 cores)
+    python training/make_zoo.py --skip-training # only copy, plot and compare existing runs
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+ZOO = ROOT / "soft_snake_gym" / "zoo"
+DOCS = ROOT / "docs" / "img"
+
+#: env id -> list of soft-snake train argument lists (later ones resume the run)
+STAGES = {
+    "SoftEel-v0": [
+        ["--n-timesteps", "300000", "--hyperparams", "env_kwargs.energy_cost_weight=0.001"],
+        ["--n-timesteps", "1000000", "--hyperparams", "env_kwargs.energy_cost_weight=0.011"],
+    ],
+    "SoftWorm-v0": [[]],
+}
+
+
+def soft_snake(*args: str) -> None:
+    cmd = [sys.executable, "-m", "soft_snake_gym.cli", *args]
+    print("$", " ".join(["soft-snake", *args]), flush=True)
+    subprocess.run(cmd, check=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", default="runs", help="folder of the run folders (default runs/)")
+    parser.add_argument("--skip-training", action="store_true", help="use the existing run folders")
+    args = parser.parse_args()
+    from soft_snake_gym.training import plot_learning_curve
+
+    for env_id, stages in STAGES.items():
+        run = Path(args.runs) / f"{env_id}_PPO_zoo"
+        if not args.skip_training:
+            soft_snake("train", env_id, "--run-dir", str(run), "--no-progress", *stages[0])
+            for stage in stages[1:]:
+                soft_snake("train", "--resume", str(run), "--no-progress", *stage)
+        dest = ZOO / env_id / "ppo"
+        dest.mkdir(parents=True, exist_ok=True)
+        shutil.copy(run / "final_model.zip", dest / "model.zip")
+        shutil.copy(run / "vecnormalize.pkl", dest / "vecnormalize.pkl")
+        for name in ("config.yaml", "command.txt", "meta.json", "learning_curve.csv"):
+            shutil.copy(run / name, dest / name)
+        plot_learning_curve(run, DOCS / f"learning_curve_{env_id}.png")
+    soft_snake("compare", "SoftEel-v0", "--episodes", "10", "--out", str(DOCS / "compare_SoftEel-v0.png"),
+               "--json", str(DOCS / "compare_SoftEel-v0.json"))
+    soft_snake("compare", "SoftWorm-v0", "--episodes", "10", "--out", str(DOCS / "compare_SoftWorm-v0.png"),
+               "--json", str(DOCS / "compare_SoftWorm-v0.json"))
+
+
+if __name__ == "__main__":
+    main()
