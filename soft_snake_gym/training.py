@@ -68,7 +68,8 @@ class TrainConfig:
         n_envs: parallel environments.
         n_timesteps: total environment steps.
         normalize: wrap the envs in ``VecNormalize`` (observations and rewards).
-        vec_env: ``dummy`` (one process) or ``subproc`` (one process per env).
+        vec_env: ``dummy`` (one process), ``subproc`` (one process per env) or ``batched``
+            (every env in one compiled call, :class:`soft_snake_gym.sb3.SoftVecEnv`).
         policy: the SB3 policy class name.
         policy_kwargs: plain YAML; ``activation_fn`` is a name in :data:`ACTIVATIONS`.
         env_kwargs: keywords for ``gym.make`` (the env's own arguments).
@@ -110,8 +111,8 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ConfigError(f"{name} = {value!r} must be an integer >= 0")
-        if self.vec_env not in ("dummy", "subproc"):
-            raise ConfigError(f"vec_env = {self.vec_env!r} must be 'dummy' or 'subproc'")
+        if self.vec_env not in ("dummy", "subproc", "batched"):
+            raise ConfigError(f"vec_env = {self.vec_env!r} must be 'dummy', 'subproc' or 'batched'")
         if not isinstance(self.normalize, bool):
             raise ConfigError(f"normalize = {self.normalize!r} must be true or false")
         act = self.policy_kwargs.get("activation_fn")
@@ -223,6 +224,10 @@ def make_train_env(cfg: TrainConfig, seed: int):
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
+    if cfg.vec_env == "batched":
+        from soft_snake_gym.sb3 import SoftVecEnv
+
+        return SoftVecEnv(cfg.env_id, n_envs=cfg.n_envs, seed=seed, **dict(cfg.env_kwargs))
     cls = SubprocVecEnv if cfg.vec_env == "subproc" else DummyVecEnv
     return make_vec_env(cfg.env_id, n_envs=cfg.n_envs, seed=seed, env_kwargs=dict(cfg.env_kwargs),
                         vec_env_cls=cls)

@@ -1,5 +1,6 @@
 """Gymnasium environments: ``SoftEel-v0`` (:class:`SwimEnv`) and ``SoftWorm-v0`` (:class:`InchEnv`).
 
+The batched :class:`SoftVectorEnv` steps many robots in one compiled call (``gym.make_vec``).
 Importing ``soft_snake_gym`` registers both ids, so ``gym.make("SoftEel-v0")`` works after
 ``import soft_snake_gym`` and ``gym.make("soft_snake_gym:SoftEel-v0")`` works without it.
 """
@@ -8,14 +9,18 @@ from soft_snake_gym.envs.base import Randomization, SoftRobotEnv
 from soft_snake_gym.envs.inch import InchEnv, InchSettings
 from soft_snake_gym.envs.registration import ENV_IDS, register_envs
 from soft_snake_gym.envs.swim import SwimEnv, SwimSettings
+from soft_snake_gym.envs.vector import InchVectorEnv, SoftVectorEnv, SwimVectorEnv
 
 __all__ = [
     "ENV_IDS",
     "InchEnv",
     "InchSettings",
+    "InchVectorEnv",
     "Randomization",
     "SoftRobotEnv",
+    "SoftVectorEnv",
     "SwimEnv",
     "SwimSettings",
+    "SwimVectorEnv",
     "register_envs",
 ]

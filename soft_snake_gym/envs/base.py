@@ -1,10 +1,11 @@
 """What the soft-robot environments share: settings, randomization, the step/reset loop, metrics.
 
 The environments are a thin task layer over one :class:`~soft_snake_gym.physics.Simulator`
-(built once per environment and reused by every ``reset``). The physics-to-observation and
-physics-to-reward code lives in plain functions of simulator arrays and quantities
-(``soft_snake_gym.envs.observe`` for observations and inputs, ``reward_terms`` and
-``episode_metrics`` here) so that a batched environment can reuse them.
+(built once per environment and reused by every ``reset``). A step is one compiled call,
+:func:`soft_snake_gym.envs.task.robot_step` (action scaling, physics, observation, reward
+terms, metrics), the same kernel the batched vector env runs over many robots; resets are
+Python (seeded noise, randomization) and are shared with the vector env too, which keeps one
+lightweight env object per robot over views of its stacked arrays.
 """
 
 from __future__ import annotations
@@ -22,87 +23,19 @@ import gymnasium as gym
 import numpy as np
 
 from soft_snake_gym.config import ConfigError, from_dict, load_yaml
+from soft_snake_gym.envs import task as T
+from soft_snake_gym.envs.task import G
 from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig
 from soft_snake_gym.physics import Simulator, body_from_curvature
+from soft_snake_gym.physics import kernels as K
 
 __all__ = [
     "G",
     "Randomization",
     "BaseSettings",
     "SoftRobotEnv",
-    "reward_terms",
-    "episode_metrics",
     "resolve_settings",
 ]
-
-G = 9.81
-"""Gravity used by the cost of transport (MODEL.md §8) [m/s^2]."""
-
-
-# --- plain functions of simulator quantities (batchable) ----------------------------------------
-def reward_terms(
-    forward_speed: float,
-    energy_power: float,
-    action_sq: float,
-    failed: bool,
-    forward_reward_weight: float,
-    energy_cost_weight: float,
-    ctrl_cost_weight: float,
-    failure_cost: float,
-) -> dict[str, float]:
-    """The named reward terms; the reward is their sum.
-
-    Args:
-        forward_speed: centre-of-mass progress along the goal over the step / dt [m/s].
-        energy_power: the energy cost's power over the step (>= 0) [W].
-        action_sq: squared 2-norm of the normalized action [-].
-        failed: the step ended in a physics failure.
-    """
-    return {
-        "reward_forward": forward_reward_weight * forward_speed,
-        "reward_energy": -energy_cost_weight * energy_power,
-        "reward_ctrl": -ctrl_cost_weight * action_sq,
-        "reward_failure": -failure_cost if failed else 0.0,
-    }
-
-
-def episode_metrics(
-    distance: float,
-    displacement: float,
-    duration: float,
-    energy_actuator: float,
-    actuator_work: float,
-    energy_medium: float,
-    medium_key: str,
-    total_mass: float,
-) -> dict[str, float]:
-    """Episode averages of MODEL.md §8 from accumulated quantities.
-
-    Args:
-        distance: centre-of-mass displacement along the goal direction [m] (signed).
-        displacement: length of the centre-of-mass displacement [m].
-        duration: simulated time [s].
-        energy_actuator: sum of |actuator work| per step [J].
-        actuator_work: signed actuator work [J].
-        energy_medium: energy lost to the fluid or to friction [J].
-        medium_key: ``"energy_fluid"`` or ``"energy_friction"``.
-        total_mass: mass of the body [kg].
-
-    Returns:
-        average_speed [m/s], distance [m], displacement [m], duration [s],
-        cost_of_transport [-] (``inf`` unless the robot made forward progress), the energies [J].
-    """
-    return {
-        "average_speed": distance / duration if duration > 0 else 0.0,
-        "distance": distance,
-        "displacement": displacement,
-        "duration": duration,
-        "cost_of_transport": energy_actuator / (total_mass * G * distance) if distance > 0 else math.inf,
-        medium_key: energy_medium,
-        "energy_actuator": energy_actuator,
-        "actuator_work": actuator_work,
-    }
-
 
 # --- settings ---------------------------------------------------------------------------------
 def _check_number(cls: str, name: str, value: Any, lo: float | None = None, lo_open: bool = False) -> None:
@@ -254,8 +187,8 @@ class SoftRobotEnv(gym.Env):
     """Base of :class:`~soft_snake_gym.envs.SwimEnv` and :class:`~soft_snake_gym.envs.InchEnv`.
 
     Subclasses set ``medium``, ``settings_class``, ``env_id`` and implement the hooks
-    ``_build_spaces``, ``_set_inputs``, ``_observe``, ``_energy_power``, ``_initial_body``,
-    ``_state_info`` and ``_check_options``.
+    ``_setup_task``, ``_build_spaces``, ``_action_params``, ``_initial_body``, ``_state_info``
+    and ``_check_options``.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 100}
@@ -266,11 +199,28 @@ class SoftRobotEnv(gym.Env):
     trail_length: ClassVar[int] = 300
 
     def __init__(self, render_mode: str | None = None, config: str | Path | None = None, **kwargs: Any):
-        self.settings = s = resolve_settings(self.settings_class, self.medium, config, kwargs, self.env_id)
+        settings = resolve_settings(self.settings_class, self.medium, config, kwargs, self.env_id)
+        self._setup(settings, render_mode)
+
+    @classmethod
+    def _over_arrays(cls, settings: BaseSettings, sim: Simulator, task: dict[str, np.ndarray]):
+        """An env (no rendering) over a given simulator and task arrays, e.g. views of a batch's
+        stacked arrays: how the vector env keeps one env object per robot."""
+        env = cls.__new__(cls)
+        env._setup(settings, None, sim=sim, task=task)
+        return env
+
+    def _setup(self, settings: BaseSettings, render_mode: str | None, sim: Simulator | None = None,
+               task: dict[str, np.ndarray] | None = None) -> None:
+        self.settings = s = settings
         self.base_config = SimConfig(
             rod=s.rod, medium=self.medium, fluid=s.fluid, ground=s.ground, integrator=s.integrator
         )
-        self.sim = Simulator(self.base_config)
+        if sim is None:
+            sim = Simulator(self.base_config)
+        else:
+            sim.set_config(self.base_config)
+        self.sim = sim
         self.N = self.sim.N
         h = s.integrator.h
         self.n_substeps = 1 if s.dt is None else int(round(s.dt / h))
@@ -296,49 +246,54 @@ class SoftRobotEnv(gym.Env):
         self.render_mode = render_mode
         self._renderer = None
 
-        self._uk = np.zeros(self.N - 2)
-        self._ul = np.zeros(self.N - 1)
+        self._setup_task()
         self._build_spaces()
         box = self.observation_space
-        self._obs_low = box.low.astype(np.float64)
-        self._obs_high = box.high.astype(np.float64)
-        self._obs_raw = np.zeros(box.shape, dtype=np.float64)  # unclipped, for info
         self._act_shape = self.action_space.shape
-
-        self.goal_direction = s.goal_direction
-        self._goal = np.array([math.cos(s.goal_direction), math.sin(s.goal_direction)])
+        if task is None:
+            task = T.allocate_task(self.N, self._act_shape[0], box.shape[0])
+        self._task = task
+        (self._tp, self._rs, self._act, self._uk, self._ul, self._w, self._obs_low, self._obs_high,
+         self._obs_raw, self._obs) = (task[k] for k in ("tp", "rs", "act", "uk", "ul", "w", "low",
+                                                         "high", "raw", "obs"))
+        self._obs_low[:] = box.low
+        self._obs_high[:] = box.high
+        self._w[:] = self._mass_fraction
+        kind, scale, lo, hi, energy = self._action_params()
+        tp = self._tp
+        tp[T.T_KIND], tp[T.T_SCALE], tp[T.T_LO], tp[T.T_HI], tp[T.T_ESRC] = kind, scale, lo, hi, energy
+        tp[T.T_DT] = self.dt
+        tp[T.T_NSUB] = self.n_substeps
+        tp[T.T_WF], tp[T.T_WE] = s.forward_reward_weight, s.energy_cost_weight
+        tp[T.T_WC], tp[T.T_FAIL] = s.ctrl_cost_weight, s.failure_cost
+        tp[T.T_MASS] = self.total_mass
+        sim = self.sim
+        self._phys = (sim._q, sim._v, sim._kbar, sim._lbar, sim._prm, sim._buf, sim._J, sim._ibuf, sim._out)
+        self._set_goal(s.goal_direction)
         self._failure: str | None = None
-        self._last_obs: np.ndarray | None = None
-        self._com = np.zeros(2)
-        self._com_start = np.zeros(2)
-        self._metrics: dict[str, float] = {}
         self._trail_com: deque = deque(maxlen=self.trail_length)
         self._trail_head: deque = deque(maxlen=self.trail_length)
         self.randomized: dict[str, float] = {}
-        self._power_actuator = self._power_medium = 0.0
+        self._metric_keys = tuple(k or self.medium_energy_key for k in T.METRIC_KEYS)
 
     # --- hooks ------------------------------------------------------------------------------
+    def _setup_task(self) -> None:
+        """Read the subclass's own settings (before the spaces are built)."""
+
     def _build_spaces(self) -> None:
         raise NotImplementedError
 
-    def _set_inputs(self, action: np.ndarray) -> float:
-        """Clip ``action`` to [-1, 1] in place and write the physical rates into ``self._uk`` /
-        ``self._ul``; return the squared norm of the clipped action (NaN if not finite)."""
+    def _action_params(self) -> tuple[int, float, float, float, int]:
+        """How the action becomes inputs and what the energy cost charges: (``task.SWIM`` or
+        ``task.INCH``, rate of action 1.0, lower and upper bound of the driven rest shape,
+        ``task.ENERGY_ACTUATOR`` or ``task.ENERGY_MEDIUM``)."""
         raise NotImplementedError
-
-    def _observe(self, raw: np.ndarray, out: np.ndarray) -> None:
-        """Write the observation, unclipped into ``raw`` (float64) and clipped to the
-        observation space into ``out`` (float32); set ``self._heading``."""
-        raise NotImplementedError
-
-    def _energy_power(self, d_actuator_energy: float, d_medium_energy: float) -> float:
-        """The power charged by the energy cost, from the step's energy increments [W]."""
-        return d_actuator_energy / self.dt
 
     def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
         raise NotImplementedError
 
-    def _state_info(self) -> dict[str, Any]:
+    def _state_info(self, r: list[float]) -> dict[str, Any]:
+        """The state entries of ``info``; ``r`` is ``self._rs`` as a list."""
         raise NotImplementedError
 
     def _check_options(self, body: dict[str, np.ndarray]) -> None:
@@ -357,8 +312,7 @@ class SoftRobotEnv(gym.Env):
             raise ValueError(
                 f"reset options {unknown} are unknown; valid options: {', '.join(body_keys)}, goal_direction"
             )
-        self.goal_direction = float(goal)
-        self._goal = np.array([math.cos(goal), math.sin(goal)])
+        self._set_goal(float(goal))
         if s.randomize.enabled:
             config, self.randomized = s.randomize.draw(self.np_random, self.base_config)
         else:
@@ -373,75 +327,56 @@ class SoftRobotEnv(gym.Env):
         self.sim.reset(**body)
 
         self._failure = None
-        self._power_actuator = self._power_medium = 0.0
-        self._com = self._com_of(self.sim._q)
-        self._com_start = self._com.copy()
-        self._metrics = self._compute_metrics()
+        q, v, kbar, lbar, prm, _, _, ibuf, out = self._phys
+        T.robot_reset(q, v, kbar, lbar, prm, ibuf, out, self._w, self._tp, self._obs_low,
+                      self._obs_high, self._obs_raw, self._obs, self._rs)
         self._trail_com.clear()
         self._trail_head.clear()
         self._record_trail()
-        obs = self._get_obs()
-        info = self._state_info()
+        info = self._state_info(self._rs.tolist())
         self._last_state_info = info.copy()
         info["randomized"] = dict(self.randomized)
         info["failure"] = None
         if self.render_mode == "human":
             self.render()
-        return obs, info
+        return self._obs.copy(), info
 
     def step(self, action):
         if self._failure is not None:
             raise RuntimeError(
                 f"{self.env_id} episode terminated ({self._failure}); call reset() before stepping again"
             )
-        a = self._check_action(action)
-        action_sq = self._set_inputs(a)
-        if action_sq != action_sq:  # NaN: a non-finite entry
+        act = self._act
+        if type(action) is np.ndarray and action.shape == self._act_shape and action.dtype.kind == "f":
+            act[:] = action
+        else:
+            act[:] = self._check_action(action)
+        status = T.robot_step(act, *self._phys, self._uk, self._ul, self._w, self._tp, self._obs_low,
+                              self._obs_high, self._obs_raw, self._obs, self._rs)
+        if status == T.BAD_ACTION:
+            a = np.asarray(action, dtype=np.float64)
             bad = np.flatnonzero(~np.isfinite(a)).tolist()
             raise ValueError(
                 f"{self.env_id} action has non-finite entries at indices {bad} ({a[bad].tolist()}); "
                 "every entry must be a finite number in [-1, 1]"
             )
-        sim = self.sim
-        e_act0, w_act0, e_med0 = sim.actuator_energy, sim.actuator_work, self._medium_energy()
-        ok = sim.advance(self.n_substeps, self._uk, self._ul)
+        ok = status == K.OK
+        r = self._rs.tolist()
         if ok:
-            com = self._com_of(sim._q)
-            forward_speed = float((com - self._com) @ self._goal) / self.dt
-            d_medium = self._medium_energy() - e_med0
-            energy_power = self._energy_power(sim.actuator_energy - e_act0, d_medium)
-            if self.n_substeps == 1:  # the simulator's own figures for its one step
-                self._power_actuator = sim.actuator_power
-                self._power_medium = sim.friction_power if self.medium == "ground" else sim.fluid_power
-            else:  # averages over the control step
-                self._power_actuator = (sim.actuator_work - w_act0) / self.dt
-                self._power_medium = d_medium / self.dt
-            self._com = com
-            obs = self._get_obs()
-            self._metrics = self._compute_metrics()
-            self._record_trail()
-        else:  # keep the last valid observation and metrics; the state may be non-finite
-            self._failure = sim.failure
-            forward_speed = energy_power = 0.0
-            obs = self._last_obs.copy()
-        s = self.settings
-        terms = reward_terms(
-            forward_speed, energy_power, action_sq, not ok, s.forward_reward_weight,
-            s.energy_cost_weight, s.ctrl_cost_weight, s.failure_cost,
-        )
-        reward = sum(terms.values())
-        if ok:
-            info = self._state_info()
+            info = self._state_info(r)
             self._last_state_info = info.copy()
         else:  # the last valid state, in new arrays (returned data must not be shared)
+            self._failure = self.sim.failure = K.STATUS_REASONS[status]
             info = {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in self._last_state_info.items()}
-        info["forward_speed"] = forward_speed
-        info.update(terms)
+        info["forward_speed"] = r[T.R_FWD]
+        info.update(zip(T.TERM_KEYS, r[T.R_RF : T.R_RFAIL + 1], strict=True))
         info["failure"] = self._failure
-        info["metrics"] = dict(self._metrics)
+        info["metrics"] = dict(zip(self._metric_keys, r[T.M_AVG :], strict=True))
+        if self.render_mode is not None and ok:
+            self._record_trail()
         if self.render_mode == "human":
             self.render()
-        return obs, reward, not ok, False, info
+        return self._obs.copy(), r[T.R_REWARD], not ok, False, info
 
     def render(self):
         if self.render_mode is None:
@@ -477,7 +412,7 @@ class SoftRobotEnv(gym.Env):
     # --- helpers --------------------------------------------------------------------------
     def _check_action(self, action) -> np.ndarray:
         try:
-            a = np.array(action, dtype=np.float64)  # a copy: _set_inputs clips it in place
+            a = np.array(action, dtype=np.float64)
         except (TypeError, ValueError) as err:
             raise ValueError(
                 f"{self.env_id} action {action!r} is not an array of numbers: {err}"
@@ -489,33 +424,25 @@ class SoftRobotEnv(gym.Env):
             )
         return a
 
-    def _com_of(self, flat: np.ndarray) -> np.ndarray:
-        """Mass-weighted mean of a flat interleaved (2N,) array of positions or velocities."""
-        return self._mass_fraction @ flat.reshape(self.N, 2)
+    def _set_goal(self, goal: float) -> None:
+        self.goal_direction = goal
+        self._goal = np.array([math.cos(goal), math.sin(goal)])
+        self._tp[T.T_GOAL], self._tp[T.T_GCOS], self._tp[T.T_GSIN] = goal, self._goal[0], self._goal[1]
 
-    def _medium_energy(self) -> float:
-        return self.sim.friction_work if self.medium == "ground" else self.sim.fluid_energy
+    @property
+    def _com(self) -> np.ndarray:
+        """Centre of mass at the last valid state, (2,) [m]."""
+        return self._rs[T.R_COMX : T.R_COMY + 1].copy()
 
-    def _get_obs(self) -> np.ndarray:
-        obs = np.empty(self._obs_raw.shape, dtype=np.float32)
-        self._observe(self._obs_raw, obs)
-        self._last_obs = obs.copy()  # returned again if the next step fails
-        return obs
-
-    def _compute_metrics(self) -> dict[str, float]:
-        sim = self.sim
-        delta = self._com - self._com_start
-        return episode_metrics(
-            float(delta @ self._goal), math.hypot(delta[0], delta[1]), sim.time,
-            sim.actuator_energy, sim.actuator_work, self._medium_energy(),
-            self.medium_energy_key, self.total_mass,
-        )
+    @property
+    def _heading(self) -> float:
+        return float(self._rs[T.R_HEADING])
 
     def _record_trail(self) -> None:
         if self.render_mode is None:
             return
         q = self.sim._q
-        self._trail_com.append(self._com.copy())
+        self._trail_com.append(self._com)
         self._trail_head.append((q[-2], q[-1]))
         self._last_x = self.sim.x
 

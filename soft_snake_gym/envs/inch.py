@@ -8,8 +8,8 @@ from typing import Any, Literal
 import numpy as np
 from gymnasium.spaces import Box
 
+from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number
-from soft_snake_gym.envs.observe import inch_observation, scale_rates
 
 __all__ = ["InchEnv", "InchSettings"]
 
@@ -145,6 +145,8 @@ class InchEnv(SoftRobotEnv):
 
     def __init__(self, render_mode: str | None = None, config: Any = None, **kwargs: Any):
         super().__init__(render_mode=render_mode, config=config, **kwargs)
+
+    def _setup_task(self) -> None:
         s = self.settings
         self.max_length_rate = float(s.max_length_rate)
         l0 = self.base_config.rod.edge_length
@@ -169,22 +171,10 @@ class InchEnv(SoftRobotEnv):
         self.observation_space = Box(low, high, dtype=np.float32)
         self.action_space = Box(-1.0, 1.0, (m,), dtype=np.float32)
 
-    def _set_inputs(self, action: np.ndarray) -> float:
+    def _action_params(self) -> tuple[int, float, float, float, int]:
         lo, hi = self.lbar_limits
-        return scale_rates(action, self.max_length_rate, self.sim._lbar, lo, hi, self.dt, self._ul)
-
-    def _observe(self, raw: np.ndarray, out: np.ndarray) -> None:
-        sim = self.sim
-        self._stuck = sim.stuck
-        self._heading = inch_observation(
-            sim.edge_lengths, sim.edge_length_rates, sim._lbar, self._stuck, sim._q, sim._v,
-            self._mass_fraction, self._obs_low, self._obs_high, raw, out,
-        )
-
-    def _energy_power(self, d_actuator_energy: float, d_medium_energy: float) -> float:
-        if self.settings.energy_source == "friction":
-            return d_medium_energy / self.dt
-        return d_actuator_energy / self.dt
+        energy = T.ENERGY_MEDIUM if self.settings.energy_source == "friction" else T.ENERGY_ACTUATOR
+        return T.INCH, self.max_length_rate, lo, hi, energy
 
     def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
         body = self._noisy_straight_body(
@@ -203,18 +193,18 @@ class InchEnv(SoftRobotEnv):
                 f"rest_length_limits [{lo:.4g}, {hi:.4g}] m; keep it within those bounds"
             )
 
-    def _state_info(self) -> dict[str, Any]:
+    def _state_info(self, r: list[float]) -> dict[str, Any]:
         sim = self.sim
-        com = self._com
+        m = self.N - 1
         return {
-            "x_position": float(com[0]),
-            "y_position": float(com[1]),
-            "heading": self._heading,
+            "x_position": r[T.R_COMX],
+            "y_position": r[T.R_COMY],
+            "heading": r[T.R_HEADING],
             "time": sim.time,
-            "friction_power": self._power_medium,
-            "actuator_power": self._power_actuator,
-            "edge_lengths": self._obs_raw[: self.N - 1].copy(),
+            "friction_power": r[T.R_P_MED],
+            "actuator_power": r[T.R_P_ACT],
+            "edge_lengths": self._obs_raw[:m].copy(),
             "lbar": sim.lbar,
-            "stuck": self._stuck,
+            "stuck": self._obs_raw[3 * m : 4 * m + 1] > 0.5,
             "newton_iterations": sim.newton_iterations,
         }

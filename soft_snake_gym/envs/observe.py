@@ -1,20 +1,25 @@
-"""Physics to observation and inputs: small numba kernels on simulator arrays.
+"""Physics to observation and inputs: small numba kernels on one robot's simulator arrays.
 
 They take the simulator's flat interleaved positions ``q`` and velocities ``v`` (2N,), its
-rest shape and the quantities its properties return, and write into preallocated outputs, so
-one call replaces a dozen small numpy operations per step (the env's overhead on top of
-``Simulator.step``), and a batched environment can call them robot by robot. They call no
-other compiled function, so their on-disk cache cannot go stale when the physics kernels
-change.
+rest shape and integer scratch, and write into preallocated outputs. The environments call
+them through the per-robot step of :mod:`soft_snake_gym.envs.task`, one robot at a time in
+``SoftEel-v0``/``SoftWorm-v0`` and over all robots at once in the batched vector env, so both
+compute observations with the same code.
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 from numba import njit
 
+from soft_snake_gym.physics import kernels as K
+from soft_snake_gym.physics.cache import drop_stale_cache
+
 __all__ = ["scale_rates", "body_velocity", "swim_observation", "inch_observation"]
+
+drop_stale_cache(__file__, [K.__file__, str(Path(K.__file__).with_name("banded.py"))])
 
 
 @njit(cache=True)
@@ -74,8 +79,8 @@ def _clip_into(raw, low, high, out):
         out[i] = x
 
 
-@njit(cache=True)
-def swim_observation(kappa, kappa_dot, kbar, q, v, w, goal, low, high, raw, out):
+@njit(cache=True, error_model="numpy")
+def swim_observation(q, v, kbar, w, goal, low, high, raw, out):
     """The ``SoftEel-v0`` observation: kappa (N-2), kappa_dot (N-2), kbar (N-2),
     com_velocity_body (2), goal_direction_body (2: cos, sin of ``goal`` minus the heading).
 
@@ -83,9 +88,9 @@ def swim_observation(kappa, kappa_dot, kbar, q, v, w, goal, low, high, raw, out)
     ``out`` (float32). Returns the heading [rad].
     """
     n = kbar.size
+    K.curvatures(q, raw[:n])
+    K.curvature_rates(q, v, raw[n : 2 * n])
     for j in range(n):
-        raw[j] = kappa[j]
-        raw[n + j] = kappa_dot[j]
         raw[2 * n + j] = kbar[j]
     heading, along, lateral = body_velocity(q, v, w)
     raw[3 * n] = along
@@ -96,18 +101,18 @@ def swim_observation(kappa, kappa_dot, kbar, q, v, w, goal, low, high, raw, out)
     return heading
 
 
-@njit(cache=True)
-def inch_observation(lengths, length_rates, lbar, stuck, q, v, w, low, high, raw, out):
+@njit(cache=True, error_model="numpy")
+def inch_observation(q, v, lbar, friction, ground, w, low, high, raw, out):
     """The ``SoftWorm-v0`` observation: edge_lengths (N-1), edge_length_rates (N-1),
-    lbar (N-1), stuck (N, 0/1), com_velocity_body (2). Same outputs as
-    :func:`swim_observation`; returns the heading [rad]."""
+    lbar (N-1), stuck (N, 0/1 from the friction states ``friction``; all 0 unless ``ground``),
+    com_velocity_body (2). Same outputs as :func:`swim_observation`; returns the heading [rad]."""
     m = lbar.size
+    K.edge_lengths(q, raw[:m])
+    K.edge_length_rates(q, v, raw[m : 2 * m])
     for k in range(m):
-        raw[k] = lengths[k]
-        raw[m + k] = length_rates[k]
         raw[2 * m + k] = lbar[k]
     for i in range(m + 1):
-        raw[3 * m + i] = 1.0 if stuck[i] else 0.0
+        raw[3 * m + i] = 1.0 if ground and friction[i] == K.STUCK else 0.0
     heading, along, lateral = body_velocity(q, v, w)
     raw[4 * m + 1] = along
     raw[4 * m + 2] = lateral

@@ -2,23 +2,33 @@
 
 Gymnasium 1.x has no plugin entry points: ``gym.make("soft_snake_gym:SoftEel-v0")`` imports
 ``soft_snake_gym``, whose import calls :func:`register_envs`. Calling it again is harmless.
+
+Each id also has a ``vector_entry_point``, the batched :class:`~soft_snake_gym.envs.vector.SoftVectorEnv`:
+Gymnasium 1.x's ``gym.make_vec(id, num_envs=...)`` uses it unless ``vectorization_mode`` says
+``"sync"`` or ``"async"``.
 """
 
 from __future__ import annotations
 
 import gymnasium as gym
 
-__all__ = ["ENV_IDS", "MAX_EPISODE_STEPS", "register_envs"]
+__all__ = ["ENV_IDS", "VECTOR_ENTRY_POINTS", "MAX_EPISODE_STEPS", "register_envs"]
 
 MAX_EPISODE_STEPS = 1000
 ENV_IDS = {
     "SoftEel-v0": "soft_snake_gym.envs.swim:SwimEnv",
     "SoftWorm-v0": "soft_snake_gym.envs.inch:InchEnv",
 }
+VECTOR_ENTRY_POINTS = {
+    "SoftEel-v0": "soft_snake_gym.envs.vector:SwimVectorEnv",
+    "SoftWorm-v0": "soft_snake_gym.envs.vector:InchVectorEnv",
+}
 
 
 def register_envs() -> None:
-    """Register ``SoftEel-v0`` and ``SoftWorm-v0`` (1000 steps each) unless already registered."""
+    """Register ``SoftEel-v0`` and ``SoftWorm-v0`` (1000 steps each, with their batched vector
+    entry points) unless already registered."""
     for env_id, entry_point in ENV_IDS.items():
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point=entry_point, max_episode_steps=MAX_EPISODE_STEPS)
+            gym.register(id=env_id, entry_point=entry_point, max_episode_steps=MAX_EPISODE_STEPS,
+                         vector_entry_point=VECTOR_ENTRY_POINTS[env_id])

@@ -9,8 +9,8 @@ from typing import Any, Literal
 import numpy as np
 from gymnasium.spaces import Box
 
+from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number
-from soft_snake_gym.envs.observe import scale_rates, swim_observation
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
 
 __all__ = ["SwimEnv", "SwimSettings"]
@@ -163,6 +163,8 @@ class SwimEnv(SoftRobotEnv):
 
     def __init__(self, render_mode: str | None = None, config: Any = None, **kwargs: Any):
         super().__init__(render_mode=render_mode, config=config, **kwargs)
+
+    def _setup_task(self) -> None:
         s = self.settings
         self.max_curvature_rate = float(s.max_curvature_rate)
         self.max_rest_curvature = float(s.max_rest_curvature)
@@ -195,19 +197,9 @@ class SwimEnv(SoftRobotEnv):
         self.observation_space = Box(-high, high, dtype=np.float32)
         self.action_space = Box(-1.0, 1.0, (n,), dtype=np.float32)
 
-    def _set_inputs(self, action: np.ndarray) -> float:
+    def _action_params(self) -> tuple[int, float, float, float, int]:
         k = self.max_rest_curvature
-        return scale_rates(action, self.max_curvature_rate, self.sim._kbar, -k, k, self.dt, self._uk)
-
-    def _observe(self, raw: np.ndarray, out: np.ndarray) -> None:
-        sim = self.sim
-        self._heading = swim_observation(
-            sim.kappa, sim.kappa_dot, sim._kbar, sim._q, sim._v, self._mass_fraction,
-            self.goal_direction, self._obs_low, self._obs_high, raw, out,
-        )
-
-    def _energy_power(self, d_actuator_energy: float, d_medium_energy: float) -> float:
-        return d_actuator_energy / self.dt
+        return T.SWIM, self.max_curvature_rate, -k, k, T.ENERGY_ACTUATOR
 
     def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
         lbar = np.full(self.N - 1, self.base_config.rod.edge_length)
@@ -221,16 +213,15 @@ class SwimEnv(SoftRobotEnv):
                 f"max_rest_curvature = {self.max_rest_curvature!r}; keep it within that bound"
             )
 
-    def _state_info(self) -> dict[str, Any]:
+    def _state_info(self, r: list[float]) -> dict[str, Any]:
         sim = self.sim
-        com = self._com
         return {
-            "x_position": float(com[0]),
-            "y_position": float(com[1]),
-            "heading": self._heading,
+            "x_position": r[T.R_COMX],
+            "y_position": r[T.R_COMY],
+            "heading": r[T.R_HEADING],
             "time": sim.time,
-            "fluid_power": self._power_medium,
-            "actuator_power": self._power_actuator,
+            "fluid_power": r[T.R_P_MED],
+            "actuator_power": r[T.R_P_ACT],
             "kappa": self._obs_raw[: self.N - 2].copy(),
             "kbar": sim.kbar,
             "newton_iterations": sim.newton_iterations,

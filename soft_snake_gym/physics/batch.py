@@ -16,10 +16,14 @@ import numpy as np
 from numba import njit, prange
 
 from soft_snake_gym.params import SimConfig
+from soft_snake_gym.physics import banded
 from soft_snake_gym.physics import kernels as K
+from soft_snake_gym.physics.cache import drop_stale_cache
 from soft_snake_gym.physics.simulator import Simulator, allocate_arrays
 
 __all__ = ["BatchSimulator", "simulate_batch"]
+
+drop_stale_cache(__file__, [K.__file__, banded.__file__])  # simulate_batch embeds their code
 
 
 @njit(cache=True, parallel=True, error_model="numpy")

@@ -1,0 +1,380 @@
+"""The batched vector environment: many robots stepped by one compiled call.
+
+``gym.make_vec("SoftEel-v0", num_envs=256)`` returns a :class:`SoftVectorEnv` (Gymnasium 1.x
+picks a registered ``vector_entry_point`` when ``vectorization_mode`` is not given; pass
+``vectorization_mode="sync"`` for a ``SyncVectorEnv`` of single envs instead).
+
+Design: the robots' physics and task arrays are stacked along a leading robot axis
+(:class:`~soft_snake_gym.physics.batch.BatchSimulator` for the physics,
+:func:`~soft_snake_gym.envs.task.allocate_task` for the task); each robot also has an ordinary
+:class:`~soft_snake_gym.envs.SwimEnv`/:class:`~soft_snake_gym.envs.InchEnv` object over views
+of those arrays. A step runs :func:`~soft_snake_gym.envs.task.batch_step`, a ``prange`` loop of
+the very kernel a single env's ``step`` calls; a reset calls that robot's env object's
+``reset`` (seeded noise, randomization draws), so robot ``i`` seeded ``s + i`` is bitwise the
+robot of ``gym.make(env_id)`` seeded ``s + i`` under the same actions, for any thread count.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numba
+import numpy as np
+from gymnasium.spaces import Box
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from soft_snake_gym.envs import task as T
+from soft_snake_gym.envs.base import SoftRobotEnv, resolve_settings
+from soft_snake_gym.envs.inch import InchEnv
+from soft_snake_gym.envs.registration import MAX_EPISODE_STEPS
+from soft_snake_gym.envs.swim import SwimEnv
+from soft_snake_gym.params import SimConfig
+from soft_snake_gym.physics import kernels as K
+from soft_snake_gym.physics.batch import BatchSimulator
+
+__all__ = ["SoftVectorEnv", "SwimVectorEnv", "InchVectorEnv", "ENV_CLASSES"]
+
+ENV_CLASSES: dict[str, type[SoftRobotEnv]] = {"SoftEel-v0": SwimEnv, "SoftWorm-v0": InchEnv}
+
+ROBOTS_PER_THREAD = 64
+"""Default threads: one per this many robots, at most ``NUMBA_NUM_THREADS``."""
+
+
+def _positive_int(name: str, value: Any, hint: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{name} = {value!r}: need an integer >= 1 ({hint})")
+    return int(value)
+
+
+class SoftVectorEnv(VectorEnv):
+    r"""``num_envs`` soft robots of one id, stepped together by one compiled call.
+
+    A Gymnasium 1.x ``VectorEnv``: batched ``Box`` spaces, ``reset(seed=...)``, ``step`` with
+    autoreset, and infos as a dict of arrays with ``_key`` masks, as ``SyncVectorEnv`` over
+    ``gym.make(env_id)`` would give them (the single env's info keys, its ``metrics``, and
+    ``episode`` = {r, l, t} on the step an episode ends, as ``RecordEpisodeStatistics``).
+
+    Autoreset: ``NEXT_STEP`` (Gymnasium's default) returns the last observation of an episode
+    on the step that ends it and resets the robot on the following ``step``, ignoring that
+    step's action for it (reward 0, the reset's info). ``SAME_STEP`` resets at once and puts
+    the last observation in ``info["final_obs"]`` and its info in ``info["final_info"]``
+    (what SB3's ``VecEnv`` convention needs; :class:`soft_snake_gym.sb3.SoftVecEnv` uses it).
+
+    Seeding: ``reset(seed=s)`` seeds robot ``i`` with ``s + i`` (a list gives one seed per
+    robot), as ``SyncVectorEnv`` does; later autoresets continue each robot's own generator.
+
+    Args:
+        env_id: ``"SoftEel-v0"`` or ``"SoftWorm-v0"``.
+        num_envs: number of robots (>= 1).
+        max_episode_steps: truncate an episode after this many steps, as ``TimeLimit`` does
+            for ``gym.make`` (default 1000, the ids' registered limit); ``None``: never.
+        num_threads: numba threads for the batched step (default: one per 64 robots, at most
+            ``NUMBA_NUM_THREADS``; 1 runs on the calling thread). Robots are independent, so
+            results do not depend on it. Threads help only on otherwise idle cores: on busy cores
+            (or next to torch's own threads) one thread is often faster.
+        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default) or ``AutoresetMode.SAME_STEP``.
+        render_mode: only ``None``; render a single env to watch a robot.
+        config: a YAML file of env keywords, as for the single env.
+        **kwargs: the single env's keywords (``rod``, ``fluid``, ``randomize``...), the same for
+            every robot (physics randomization draws differ per robot).
+    """
+
+    env_id = ""
+
+    def __init__(
+        self,
+        env_id: str | None = None,
+        num_envs: int = 1,
+        *,
+        max_episode_steps: int | None = MAX_EPISODE_STEPS,
+        num_threads: int | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        render_mode: str | None = None,
+        config: Any = None,
+        **kwargs: Any,
+    ) -> None:
+        env_id = env_id or self.env_id
+        if env_id not in ENV_CLASSES:
+            raise ValueError(f"env_id = {env_id!r} has no batched version; use one of {list(ENV_CLASSES)}")
+        self.env_id = env_id
+        env_cls = ENV_CLASSES[env_id]
+        n = _positive_int("num_envs", num_envs, "the number of robots")
+        if max_episode_steps is not None:
+            max_episode_steps = _positive_int("max_episode_steps", max_episode_steps,
+                                              "or None for no time limit")
+        max_threads = numba.config.NUMBA_NUM_THREADS
+        if num_threads is not None and (
+            isinstance(num_threads, bool) or not isinstance(num_threads, (int, np.integer))
+            or not 1 <= num_threads <= max_threads
+        ):
+            raise ValueError(
+                f"num_threads = {num_threads!r}: need an integer in [1, {max_threads}] "
+                f"(NUMBA_NUM_THREADS = {max_threads}), or None for all"
+            )
+        try:
+            mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            mode = None
+        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+            raise ValueError(
+                f"autoreset_mode = {autoreset_mode!r} is not supported; use AutoresetMode.NEXT_STEP "
+                "or AutoresetMode.SAME_STEP"
+            )
+        if render_mode is not None:
+            raise ValueError(
+                f"render_mode = {render_mode!r}: the batched env does not render; render a single "
+                f'env, gym.make("{env_id}", render_mode="rgb_array")'
+            )
+        settings = resolve_settings(env_cls.settings_class, env_cls.medium, config, kwargs, env_id)
+
+        self.num_envs = n
+        self.max_episode_steps = max_episode_steps
+        self.autoreset_mode = mode
+        self.render_mode = None
+        base_config = SimConfig(rod=settings.rod, medium=env_cls.medium, fluid=settings.fluid,
+                                ground=settings.ground, integrator=settings.integrator)
+        if num_threads is None:  # a thread pays for its wake-up only with enough robots to share
+            num_threads = min(max_threads, max(1, n // ROBOTS_PER_THREAD))
+        self.batch = BatchSimulator(base_config, n, num_threads=num_threads)
+        self.num_threads = self.batch.num_threads
+        proto = env_cls._over_arrays(settings, self.batch.sims[0], None)
+        n_act, n_obs = proto.action_space.shape[0], proto.observation_space.shape[0]
+        self._task = T.allocate_task(proto.N, n_act, n_obs, (n,))
+        self.envs: list[SoftRobotEnv] = [
+            env_cls._over_arrays(settings, sim, {k: a[i] for k, a in self._task.items()})
+            for i, sim in enumerate(self.batch.sims)
+        ]
+        self.settings = settings
+        self.N = proto.N
+        self.dt = proto.dt
+        self.observation_structure = proto.observation_structure
+        self.single_observation_space: Box = proto.observation_space
+        self.single_action_space: Box = proto.action_space
+        self.observation_space = batch_space(self.single_observation_space, n)
+        self.action_space = batch_space(self.single_action_space, n)
+        self.metadata = {"autoreset_mode": mode, "render_modes": [], "render_fps": proto.metadata["render_fps"]}
+        self._medium_power_key = "friction_power" if env_cls.medium == "ground" else "fluid_power"
+        self._metric_keys = proto._metric_keys
+        self._act_shape = (n, n_act)
+
+        t = self._task
+        self._step_args = (t["act"], *self.batch._arrays, t["uk"], t["ul"], t["w"], t["tp"],
+                           t["low"], t["high"], t["raw"], t["obs"], t["rs"])
+        self._rs, self._raw, self._obs = t["rs"], t["raw"], t["obs"]
+        self._out, self._shape = self.batch._arrays[8], self.batch.kbar if env_id == "SoftEel-v0" else self.batch.lbar
+        self._info_cols = np.array([T.R_COMX, T.R_COMY, T.R_HEADING, T.R_P_MED, T.R_P_ACT, T.R_FWD, T.R_RF,
+                                    T.R_RE, T.R_RC, T.R_RFAIL, *range(T.M_AVG, T.N_RS)])
+        self._status = np.zeros(n, dtype=np.int64)
+        self._autoreset = np.zeros(n, dtype=np.bool_)
+        self._all = np.ones(n, dtype=np.bool_)
+        self._elapsed = np.zeros(n, dtype=np.int64)
+        self._returns = np.zeros(n)
+        self._starts = np.zeros(n)
+        self._needs_reset = True
+
+    # --- Gymnasium VectorEnv API ----------------------------------------------------------------
+    def reset(self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None):
+        """Reset every robot; ``seed`` an int (robot ``i`` gets ``seed + i``) or one per robot."""
+        super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
+        if seed is None or isinstance(seed, (int, np.integer)):
+            seeds = [None if seed is None else int(seed) + i for i in range(self.num_envs)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(
+                    f"seed has {len(seeds)} entries for {self.num_envs} robots; give one per robot or one int"
+                )
+        reset_infos = [self._reset_robot(i, seeds[i], options) for i in range(self.num_envs)]
+        self._autoreset[:] = False
+        self._needs_reset = False
+        return self._obs.copy(), self._infos(np.zeros(self.num_envs, dtype=np.bool_), self._all, reset_infos)
+
+    def step(self, actions):
+        """Step every robot (in ``NEXT_STEP`` mode, reset those whose episode ended last step)."""
+        if self._needs_reset:
+            raise RuntimeError(f"{self.env_id} vector env: call reset() before step()")
+        n = self.num_envs
+        none = np.zeros(n, dtype=np.bool_)
+        same_step = self.autoreset_mode == AutoresetMode.SAME_STEP
+        resetting = none if same_step else self._autoreset
+        stepping = ~resetting
+        terminated, truncated = self._advance(actions, stepping)
+        rewards = np.where(stepping, self._rs[:, T.R_REWARD], 0.0)
+        dones = terminated | truncated
+        any_done = bool(dones.any())
+        stats = self._episode_stats(dones) if any_done else None
+        infos: dict[str, Any] = {}
+        if same_step and any_done:
+            final_obs = np.full(n, None, dtype=object)
+            for i in np.flatnonzero(dones):
+                final_obs[i] = self._obs[i].copy()
+            infos["final_obs"], infos["_final_obs"] = final_obs, dones.copy()
+            infos["final_info"], infos["_final_info"] = self._infos(dones, none, []), dones.copy()
+            resetting, stepping = dones, ~dones
+        reset_infos = [self._reset_robot(i) for i in np.flatnonzero(resetting)]
+        infos.update(self._infos(stepping, resetting, reset_infos))
+        if stats is not None:
+            infos["episode"], infos["_episode"] = stats, dones.copy()
+        self._autoreset = none if same_step else dones
+        return self._obs.copy(), rewards, terminated, truncated, infos
+
+    def close_extras(self, **kwargs: Any) -> None:
+        for env in self.envs:
+            env.close()
+
+    # --- the engine, shared with the SB3 adapter -----------------------------------------------
+    def _advance(self, actions, stepping: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Step the robots in ``stepping`` by ``actions`` (n, n_act); update episode counters.
+        Returns (terminated, truncated), False for robots not stepped."""
+        act = self._task["act"]
+        if not (type(actions) is np.ndarray and actions.shape == self._act_shape and actions.dtype.kind == "f"):
+            try:
+                actions = np.asarray(actions, dtype=np.float64)
+            except (TypeError, ValueError) as err:
+                raise ValueError(f"{self.env_id} vector env actions are not an array of numbers: {err}") from None
+            if actions.shape != self._act_shape:
+                raise ValueError(
+                    f"{self.env_id} vector env actions have shape {actions.shape}; expected "
+                    f"{self._act_shape} (one row of values in [-1, 1] per robot)"
+                )
+        act[:] = actions
+        finite = np.isfinite(act).all(axis=1)
+        if not finite[stepping].all():
+            bad = np.flatnonzero(stepping & ~finite).tolist()
+            raise ValueError(
+                f"{self.env_id} vector env actions have non-finite entries for robots {bad[:8]}; "
+                "every entry must be a finite number in [-1, 1]"
+            )
+        out = self._out
+        self._prev = (out[:, K.O_NSTEPS].copy(), out[:, K.O_NITER].copy(), self._shape.copy())
+        status = self._status
+        status[:] = K.OK
+        if self.num_threads == 1:
+            T.batch_step_serial(stepping, *self._step_args, status)
+        else:
+            numba.set_num_threads(self.num_threads)
+            T.batch_step(stepping, *self._step_args, status)
+        terminated = status != K.OK
+        if terminated.any():
+            for i in np.flatnonzero(terminated):
+                env = self.envs[i]
+                env._failure = env.sim.failure = K.STATUS_REASONS[status[i]]
+        rewards = self._rs[:, T.R_REWARD]
+        if stepping.all():
+            self._elapsed += 1
+            self._returns += rewards
+        else:
+            self._elapsed[stepping] += 1
+            self._returns[stepping] += rewards[stepping]
+        if self.max_episode_steps is None:
+            truncated = np.zeros(self.num_envs, dtype=np.bool_)
+        else:
+            truncated = stepping & (self._elapsed >= self.max_episode_steps)
+        return terminated, truncated
+
+    def _reset_robot(self, i: int, seed: int | None = None, options: dict[str, Any] | None = None) -> dict:
+        """Reset robot ``i`` through its env object; returns that env's reset info."""
+        _, info = self.envs[i].reset(seed=seed, options=options)
+        self._elapsed[i] = 0
+        self._returns[i] = 0.0
+        self._starts[i] = time.perf_counter()
+        return info
+
+    def _time(self, nsteps: np.ndarray) -> np.ndarray:
+        """Simulated time of each robot from its step count, as :attr:`Simulator.time` [s]."""
+        return nsteps * self.batch._arrays[4][:, K.P_H]
+
+    def _episode_stats(self, dones: np.ndarray) -> dict[str, np.ndarray]:
+        now = time.perf_counter()
+        return {
+            "r": np.where(dones, self._returns, 0.0),
+            "l": np.where(dones, self._elapsed, 0),
+            "t": np.where(dones, np.round(now - self._starts, 6), 0.0),
+        }
+
+    def _infos(self, stepped: np.ndarray, reset: np.ndarray, reset_infos: list[dict]) -> dict[str, Any]:
+        """Infos of robots that ``stepped`` and were ``reset`` (``reset_infos`` in robot order),
+        with Gymnasium's ``_key`` masks, as ``SyncVectorEnv`` would gather the single envs'."""
+        n = self.num_envs
+        infos: dict[str, Any] = {}
+        present = stepped | reset
+        any_stepped = bool(stepped.any())
+        if not present.any():
+            return infos
+        rs, out = self._rs, self._out
+        cols = np.ascontiguousarray(rs[:, self._info_cols].T)  # one gather for every float key
+        nsteps, niter, shape = out[:, K.O_NSTEPS].copy(), out[:, K.O_NITER].copy(), self._shape.copy()
+        failed = stepped & (self._status != K.OK)
+        if failed.any():  # the last valid state, as the single env reports it
+            prev_nsteps, prev_niter, prev_shape = self._prev
+            nsteps[failed] = prev_nsteps[failed]
+            niter[failed] = prev_niter[failed]
+            shape[failed] = prev_shape[failed]
+        raw = self._raw
+        state = dict(zip(("x_position", "y_position", "heading"), cols[:3], strict=True))
+        state["time"] = self._time(nsteps)
+        state[self._medium_power_key] = cols[3]
+        state["actuator_power"] = cols[4]
+        if self.env_id == "SoftEel-v0":
+            state["kappa"] = raw[:, : self.N - 2].copy()
+            state["kbar"] = shape
+        else:
+            m = self.N - 1
+            state["edge_lengths"] = raw[:, :m].copy()
+            state["lbar"] = shape
+            state["stuck"] = raw[:, 3 * m : 4 * m + 1] > 0.5
+        state["newton_iterations"] = niter.astype(np.int64)
+        all_present = bool(present.all())
+        if not all_present:
+            hidden = ~present
+            for value in state.values():
+                value[hidden] = 0
+        mask = present.copy()  # one mask array per group of keys (read-only by convention)
+        for key, value in state.items():
+            infos[key], infos[f"_{key}"] = value, mask
+        failure = np.full(n, None, dtype=object)
+        for i in np.flatnonzero(failed):
+            failure[i] = K.STATUS_REASONS[self._status[i]]
+        infos["failure"], infos["_failure"] = failure, mask
+        if any_stepped:
+            step_rows = cols[5:]
+            if not stepped.all():
+                step_rows[:, ~stepped] = 0.0
+            mask = stepped.copy()
+            for key, value in zip(("forward_speed", *T.TERM_KEYS), step_rows[:5], strict=True):
+                infos[key], infos[f"_{key}"] = value, mask
+            metrics: dict[str, Any] = {}
+            for key, value in zip(self._metric_keys, step_rows[5:], strict=True):
+                metrics[key], metrics[f"_{key}"] = value, mask
+            infos["metrics"], infos["_metrics"] = metrics, mask
+        if reset.any():
+            randomized: dict[str, Any] = {}
+            for i, info in zip(np.flatnonzero(reset), reset_infos, strict=True):
+                for key, value in info["randomized"].items():
+                    if key not in randomized:
+                        randomized[key] = np.zeros(n)
+                        randomized[f"_{key}"] = np.zeros(n, dtype=np.bool_)
+                    randomized[key][i] = value
+                    randomized[f"_{key}"][i] = True
+            infos["randomized"], infos["_randomized"] = randomized, reset.copy()
+        return infos
+
+
+class SwimVectorEnv(SoftVectorEnv):
+    """:class:`SoftVectorEnv` of ``SoftEel-v0`` (its ``vector_entry_point``)."""
+
+    env_id = "SoftEel-v0"
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        super().__init__("SoftEel-v0", num_envs, **kwargs)
+
+
+class InchVectorEnv(SoftVectorEnv):
+    """:class:`SoftVectorEnv` of ``SoftWorm-v0`` (its ``vector_entry_point``)."""
+
+    env_id = "SoftWorm-v0"
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        super().__init__("SoftWorm-v0", num_envs, **kwargs)

@@ -1,0 +1,160 @@
+"""Stable-Baselines3 glue: the batched vector env as an SB3 ``VecEnv``.
+
+``SoftVecEnv("SoftEel-v0", n_envs=64)`` runs every robot in one compiled call per step (see
+:class:`~soft_snake_gym.envs.vector.SoftVectorEnv`) and speaks SB3's ``VecEnv`` protocol, so
+``PPO("MlpPolicy", SoftVecEnv(...))``, ``VecNormalize`` and ``evaluate_policy`` work on it::
+
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+    from soft_snake_gym.sb3 import SoftVecEnv
+
+    env = VecNormalize(SoftVecEnv("SoftEel-v0", n_envs=64, seed=0))
+    PPO("MlpPolicy", env).learn(1_000_000)
+
+SB3's conventions, which differ from Gymnasium's vector API: an episode's robot is reset in the
+step that ends it (Gymnasium's ``SAME_STEP`` autoreset), its last observation is in
+``info["terminal_observation"]`` and ``info["TimeLimit.truncated"]`` says whether the time
+limit (not a failure) ended it; ``infos`` is a list of one dict per robot. Episode statistics
+``info["episode"] = {"r", "l", "t"}`` (what SB3's ``Monitor`` adds) come with the episode's
+``metrics`` and ``failure``, so no ``Monitor``/``VecMonitor`` is needed. By default a robot's
+info is empty on other steps (building per-robot dicts of the env's per-step quantities would
+cost more than the physics at large ``n_envs``); ``step_info=True`` gives the single env's full
+info every step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
+
+from soft_snake_gym.envs import task as T
+from soft_snake_gym.envs.registration import MAX_EPISODE_STEPS
+from soft_snake_gym.envs.vector import SoftVectorEnv
+
+__all__ = ["SoftVecEnv"]
+
+
+class SoftVecEnv(VecEnv):
+    """``n_envs`` robots of ``env_id`` as an SB3 ``VecEnv`` over one batched simulator.
+
+    Args:
+        env_id: ``"SoftEel-v0"`` or ``"SoftWorm-v0"``.
+        n_envs: number of robots.
+        seed: robot ``i`` is seeded ``seed + i`` at the first reset (as ``make_vec_env``);
+            ``None``: unseeded. ``VecEnv.seed(s)`` reseeds the next reset the same way.
+        max_episode_steps: time limit per episode (default 1000, as ``gym.make``); ``None``: none.
+        num_threads: numba threads for the batched step (default: one per 64 robots).
+        step_info: also put the single env's per-step info into every robot's info dict.
+        **env_kwargs: the env's keywords (``rod``, ``energy_cost_weight``, ``config``...).
+    """
+
+    def __init__(
+        self,
+        env_id: str = "SoftEel-v0",
+        n_envs: int = 8,
+        *,
+        seed: int | None = None,
+        max_episode_steps: int | None = MAX_EPISODE_STEPS,
+        num_threads: int | None = None,
+        step_info: bool = False,
+        **env_kwargs: Any,
+    ) -> None:
+        self.venv = SoftVectorEnv(
+            env_id, n_envs, max_episode_steps=max_episode_steps, num_threads=num_threads,
+            autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs,
+        )
+        self.env_id = env_id
+        self.step_info = bool(step_info)
+        self._actions: np.ndarray | None = None
+        self._all = np.ones(n_envs, dtype=np.bool_)
+        super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
+        if seed is not None:
+            self.seed(seed)
+
+    # --- VecEnv API ------------------------------------------------------------------------------
+    def reset(self) -> np.ndarray:
+        venv = self.venv
+        for i in range(self.num_envs):
+            options = self._options[i] or None
+            self.reset_infos[i] = venv._reset_robot(i, self._seeds[i], options)
+        venv._autoreset[:] = False
+        venv._needs_reset = False
+        self._reset_seeds()
+        self._reset_options()
+        return venv._obs.copy()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = actions
+
+    def step_wait(self):
+        venv = self.venv
+        if venv._needs_reset:
+            raise RuntimeError(f"{self.env_id} SoftVecEnv: call reset() before step()")
+        terminated, truncated = venv._advance(self._actions, self._all)
+        rewards = venv._rs[:, T.R_REWARD].astype(np.float32)
+        dones = terminated | truncated
+        if self.step_info:
+            full = venv._infos(self._all, ~self._all, [])
+            infos = [_row(full, i) for i in range(self.num_envs)]
+        else:
+            infos = [{} for _ in range(self.num_envs)]
+        if dones.any():
+            stats = venv._episode_stats(dones)
+            failures = venv._status
+            for i in np.flatnonzero(dones):
+                env = venv.envs[i]
+                info = infos[i]
+                info["terminal_observation"] = venv._obs[i].copy()
+                info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+                info["episode"] = {"r": float(stats["r"][i]), "l": int(stats["l"][i]),
+                                   "t": float(stats["t"][i])}
+                info["metrics"] = dict(zip(env._metric_keys, venv._rs[i, T.M_AVG :].tolist(), strict=True))
+                info["failure"] = env._failure if failures[i] else None
+                venv._reset_robot(i)
+        return venv._obs.copy(), rewards, dones, infos
+
+    def close(self) -> None:
+        self.venv.close()
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        return [getattr(self.venv.envs[i], attr_name) for i in self._indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        for i in self._indices(indices):
+            setattr(self.venv.envs[i], attr_name, value)
+
+    def env_method(self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs) -> list[Any]:
+        return [getattr(self.venv.envs[i], method_name)(*method_args, **method_kwargs)
+                for i in self._indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
+        """True for SB3's ``Monitor``: the adapter records its episode statistics itself (so
+        ``evaluate_policy`` reads ``info["episode"]``); False for any other wrapper."""
+        from stable_baselines3.common.monitor import Monitor
+
+        return [wrapper_class is Monitor for _ in self._indices(indices)]
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        return [None for _ in range(self.num_envs)]
+
+    def _indices(self, indices: VecEnvIndices) -> Iterable[int]:
+        return self._get_indices(indices)
+
+
+def _row(infos: dict[str, Any], i: int) -> dict[str, Any]:
+    """Robot ``i``'s entries of a Gymnasium vector info dict, as the single env's info."""
+    row: dict[str, Any] = {}
+    for key, value in infos.items():
+        if key.startswith("_") or not infos.get(f"_{key}", np.zeros(i + 1, bool))[i]:
+            continue
+        if isinstance(value, dict):
+            row[key] = _row(value, i)
+        else:
+            item = value[i]
+            row[key] = item.copy() if isinstance(item, np.ndarray) else item.item() if hasattr(item, "item") else item
+    return row
+
