@@ -173,6 +173,8 @@ class SoftVectorEnv(VectorEnv):
         self._returns = np.zeros(n)
         self._starts = np.zeros(n)
         self._needs_reset = True
+        self.kernel_seconds = 0.0
+        """Wall-clock seconds spent in the compiled batched step so far (for profiling)."""
 
     # --- Gymnasium VectorEnv API ----------------------------------------------------------------
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None):
@@ -251,11 +253,13 @@ class SoftVectorEnv(VectorEnv):
         self._prev = (out[:, K.O_NSTEPS].copy(), out[:, K.O_NITER].copy(), self._shape.copy())
         status = self._status
         status[:] = K.OK
+        start = time.perf_counter()
         if self.num_threads == 1:
             T.batch_step_serial(stepping, *self._step_args, status)
         else:
             numba.set_num_threads(self.num_threads)
             T.batch_step(stepping, *self._step_args, status)
+        self.kernel_seconds += time.perf_counter() - start
         terminated = status != K.OK
         if terminated.any():
             for i in np.flatnonzero(terminated):

@@ -1,0 +1,152 @@
+"""Where a robot step's time goes: the compiled parts of one SoftEel-v0 step, timed inside numba.
+
+Drives 64 batched eels with uniform random actions (an untrained policy, the benchmark's
+load) and with the thesis gait, counts Newton iterations per step, then times each kernel of
+the step on a representative state in a compiled loop (no Python dispatch), and the Python
+side of ``gym.make("SoftEel-v0").step`` with cProfile.
+
+    python benchmarks/profile_step.py
+"""
+
+from __future__ import annotations
+
+import cProfile
+import io
+import math
+import pstats
+import time
+
+import gymnasium as gym
+import numpy as np
+from numba import njit
+
+import soft_snake_gym  # noqa: F401 - registers the ids
+from soft_snake_gym.envs import observe
+from soft_snake_gym.envs import task as T
+from soft_snake_gym.gaits import serpenoid, serpenoid_phase
+from soft_snake_gym.physics import banded
+from soft_snake_gym.physics import kernels as K
+
+
+@njit
+def _loop_residual(k, q, v, kbar, lbar, prm, buf, J, ibuf, jac):
+    s = 0.0
+    for _ in range(k):
+        s += K._be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, 0.01, K.MEDIUM_WATER, jac)[0]
+    return s
+
+
+@njit
+def _loop_lu(k, J, Jw, piv, b, bw):
+    for _ in range(k):
+        Jw[:, :] = J
+        bw[:] = b
+        banded.band_lu(Jw, piv, Jw.shape[0])
+        banded.band_solve(Jw, piv, Jw.shape[0], bw)
+
+
+@njit
+def _loop_copy(k, J, Jw, b, bw):
+    for _ in range(k):
+        Jw[:, :] = J
+        bw[:] = b
+
+
+@njit
+def _loop_check(k, q, v, kbar, lbar, uk, ul, prm, buf, ibuf):
+    s = 0.0
+    for _ in range(k):
+        s += K.check_state(q, v, lbar, prm, buf, ibuf) + K.actuator_power(q, kbar, lbar, uk, ul, prm)
+    return s
+
+
+@njit
+def _loop_observe(k, q, v, kbar, w, low, high, raw, obs):
+    s = 0.0
+    for _ in range(k):
+        s += observe.swim_observation(q, v, kbar, w, 0.0, low, high, raw, obs)
+    return s
+
+
+@njit
+def _loop_step(k, act, A, q, v, kbar, lbar, prm, buf, J, ibuf, out, uk, ul, w, tp, low, high, raw, obs, rs):
+    for s in range(k):
+        act[:] = A[s % A.shape[0]]
+        T.robot_step(act, q, v, kbar, lbar, prm, buf, J, ibuf, out, uk, ul, w, tp, low, high, raw, obs, rs)
+
+
+def _us(fn, *args, k=20000) -> float:
+    fn(10, *args)
+    start = time.perf_counter()
+    fn(k, *args)
+    return (time.perf_counter() - start) / k * 1e6
+
+
+def newton_iterations(actions: str, robots: int = 64, steps: int = 300) -> np.ndarray:
+    venv = gym.make_vec("SoftEel-v0", num_envs=robots, num_threads=1)
+    venv.reset(seed=0)
+    if actions == "random":
+        A = np.random.default_rng(0).uniform(-1, 1, (steps, robots, 8)).astype(np.float32)
+    else:
+        n, omega, alpha = 8, 2 * math.pi / 3, math.pi / 6
+        t = (np.arange(steps) + 0.5) * 0.01
+        r = np.array([serpenoid(serpenoid_phase(ti, n, omega, 2 * math.pi / n), omega, alpha)[1] for ti in t])
+        A = np.repeat((r / (2 * math.pi))[:, None, :], robots, axis=1).astype(np.float32)
+    its = [venv.step(a)[4]["newton_iterations"] for a in A]
+    return np.bincount(np.concatenate(its), minlength=6) / (steps * robots)
+
+
+def main() -> None:
+    for kind in ("random", "gait"):
+        frac = newton_iterations(kind)
+        mean = float(frac @ np.arange(frac.size))
+        print(f"Newton iterations per step, {kind} actions: mean {mean:.2f}; "
+              + ", ".join(f"{i}: {100 * f:.0f} %" for i, f in enumerate(frac) if f > 0))
+
+    env = gym.make("SoftEel-v0")
+    env.reset(seed=0)
+    rng = np.random.default_rng(1)
+    for a in rng.uniform(-1, 1, (30, 8)).astype(np.float32):
+        env.step(a)
+    u = env.unwrapped
+    q, v, kbar, lbar, prm, buf, J, ibuf, out = (a.copy() for a in u._phys)
+    _loop_residual(1, q, v, kbar, lbar, prm, buf, J, ibuf, True)  # a Jacobian to factor
+    piv = ibuf[K.I_PIV].copy()
+    Jw, b, bw = np.empty_like(J), np.ones(q.size), np.empty(q.size)
+    A = rng.uniform(-1, 1, (64, 8))
+    parts = {
+        "whole robot_step (random actions)": _us(_loop_step, u._act.copy(), A, q.copy(), v.copy(), kbar.copy(),
+                                                 lbar.copy(), prm, buf.copy(), J.copy(), ibuf.copy(), out.copy(),
+                                                 u._uk.copy(), u._ul.copy(), u._w, u._tp.copy(), u._obs_low,
+                                                 u._obs_high, u._obs_raw.copy(), u._obs.copy(), u._rs.copy(), k=5000),
+        "residual + Jacobian (assemble, drag, added mass)": _us(_loop_residual, q.copy(), v.copy(), kbar, lbar,
+                                                                prm, buf.copy(), J.copy(), ibuf.copy(), True),
+        "residual only (line-search trial)": _us(_loop_residual, q.copy(), v.copy(), kbar, lbar, prm, buf.copy(),
+                                                 J.copy(), ibuf.copy(), False),
+        "banded LU + solve (2N = 20, KL = KU = 5)": _us(_loop_lu, J, Jw, piv, b, bw) - _us(_loop_copy, J, Jw, b, bw),
+        "state check + actuator power": _us(_loop_check, q, v, kbar, lbar, u._uk, u._ul, prm, buf.copy(),
+                                            ibuf.copy()),
+        "observation (kappa, kappa_dot, kbar, body velocity)": _us(_loop_observe, q, v, kbar, u._w, u._obs_low,
+                                                                   u._obs_high, u._obs_raw.copy(),
+                                                                   u._obs.copy()),
+    }
+    print("\nCompiled parts, microseconds per call (in a compiled loop, no dispatch):")
+    for name, us in parts.items():
+        print(f"  {name:<55} {us:7.2f}")
+
+    pr = cProfile.Profile()
+    acts = rng.uniform(-1, 1, (3000, 8)).astype(np.float32)
+    pr.enable()
+    for a in acts:
+        _, _, term, trunc, _ = env.step(a)
+        if term or trunc:
+            env.reset()
+    pr.disable()
+    s = io.StringIO()
+    pstats.Stats(pr, stream=s).sort_stats("tottime").print_stats(10)
+    print("\ncProfile of 3000 gym.make('SoftEel-v0').step calls (tottime, top 10):")
+    print("\n".join(line for line in s.getvalue().splitlines() if line.strip())[:3000])
+
+
+if __name__ == "__main__":
+    main()

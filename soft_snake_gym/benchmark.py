@@ -1,0 +1,447 @@
+"""``soft-snake benchmark``: steps per second, side by side with MuJoCo's ``Swimmer-v5``.
+
+Everything is measured in one run on one machine, so the ratios hold even when the absolute
+numbers move with the load:
+
+(a) ``gym.make("SoftEel-v0")``, one env with Gymnasium's standard wrappers;
+(b) the batched vector env (``gym.make_vec``) at 1, 16, 256 and 1024 robots, with one thread
+    and, from 128 robots (where the env's default uses them), with every core;
+(c) ``gym.make("Swimmer-v5")`` and a ``SyncVectorEnv`` of it (needs ``mujoco``: the ``bench``
+    extra; without it those rows are skipped and said so);
+(d) PPO training throughput (``model.learn`` environment steps per second, the package's
+    ``SoftEel-v0`` PPO hyperparameters, ``VecNormalize``) with the batched env and with SB3's
+    ``SubprocVecEnv`` at equal ``n_envs``;
+(e) cost per robot step of the batched env against the number of nodes N = 10, 20, 50, 100
+    (the same 1.62 m, 7.2 kg body cut into N - 1 edges, swimming the thesis's serpenoid gait).
+
+Throughput cases drive every env with uniform random actions in [-1, 1] (an untrained
+policy), resetting when an episode ends. The cases are interleaved over ``repeats`` rounds
+and each reports the median round, so a load change during the run hits all of them alike.
+Results go to a JSON file and a PNG figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from soft_snake_gym.cli import CLIError, subcommand
+
+__all__ = ["run_benchmark", "format_report", "plot_benchmark", "DEFAULT_ROBOTS", "DEFAULT_NODES"]
+
+DEFAULT_ROBOTS = (1, 16, 256, 1024)
+DEFAULT_NODES = (10, 20, 50, 100)
+TARGETS = {"single_vs_swimmer": 2.0, "batched256_vs_swimmer": 10.0, "ppo_batched_vs_subproc": 1.5}
+
+
+# --- throughput cases ------------------------------------------------------------------------
+class _SingleCase:
+    """A ``gym.make`` env stepped by pre-drawn random actions, reset at episode ends."""
+
+    def __init__(self, env_id: str, **kwargs: Any) -> None:
+        import gymnasium as gym
+
+        self.env = gym.make(env_id, **kwargs)
+        self.env.reset(seed=0)
+        rng = np.random.default_rng(0)
+        self.actions = rng.uniform(-1, 1, (1000,) + self.env.action_space.shape).astype(np.float32)
+        self.robots = 1
+
+    def run(self, seconds: float) -> float:
+        env, steps = self.env, 0
+        start = time.perf_counter()
+        while True:
+            for a in self.actions[:100]:
+                _, _, term, trunc, _ = env.step(a)
+                if term or trunc:
+                    env.reset()
+            steps += 100
+            elapsed = time.perf_counter() - start
+            if elapsed >= seconds:
+                return steps / elapsed
+
+
+class _VectorCase:
+    """A vector env (batched or ``SyncVectorEnv``) with autoreset; rate in robot-steps/s."""
+
+    def __init__(self, make: Callable[[], Any], robots: int) -> None:
+        self.env = make()
+        self.env.reset(seed=0)
+        rng = np.random.default_rng(0)
+        self.actions = rng.uniform(-1, 1, (32,) + self.env.action_space.shape).astype(np.float32)
+        self.robots = robots
+        for a in self.actions[:2]:  # load the compiled code
+            self.env.step(a)
+
+    def run(self, seconds: float) -> float:
+        env, steps = self.env, 0
+        start = time.perf_counter()
+        while True:
+            for a in self.actions:
+                env.step(a)
+            steps += len(self.actions)
+            elapsed = time.perf_counter() - start
+            if elapsed >= seconds:
+                return steps * self.robots / elapsed
+
+
+def _kernel_share(case: _VectorCase, seconds: float) -> float:
+    """Fraction of a batched env's step time spent in the compiled call (the rest: Python,
+    autoresets, infos)."""
+    venv = case.env
+    venv.kernel_seconds = 0.0
+    start = time.perf_counter()
+    case.run(seconds)
+    return venv.kernel_seconds / (time.perf_counter() - start)
+
+
+def _have_mujoco() -> str | None:
+    try:
+        import mujoco  # noqa: F401
+    except ImportError as err:
+        return f"mujoco is not installed ({err}); pip install 'soft-snake-gym[bench]' for the Swimmer-v5 rows"
+    return None
+
+
+# --- PPO --------------------------------------------------------------------------------------
+def _ppo_settings(env_id: str) -> tuple[int, dict[str, Any], dict[str, Any]]:
+    """n_envs, PPO keywords and env keywords of the package's PPO config for ``env_id``."""
+    import yaml
+
+    from soft_snake_gym.training import CONFIGS
+
+    cfg = dict(yaml.safe_load((CONFIGS / "ppo.yml").read_text())[env_id])
+    n_envs = int(cfg.pop("n_envs", 8))
+    env_kwargs = dict(cfg.pop("env_kwargs", {}) or {})
+    run_keys = ("n_timesteps", "normalize", "policy", "vec_env", "eval_freq", "eval_episodes",
+                "eval_seed", "checkpoint_freq", "baseline", "seed")
+    for key in run_keys:
+        cfg.pop(key, None)
+    return n_envs, cfg, env_kwargs
+
+
+def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict[str, Any]:
+    """``model.learn`` environment steps per second with the batched env or ``SubprocVecEnv``
+    (after one warm-up rollout and update), at the package's PPO settings for ``env_id``."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
+
+    from soft_snake_gym.sb3 import SoftVecEnv
+
+    cfg_envs, ppo_kwargs, env_kwargs = _ppo_settings(env_id)
+    n_envs = n_envs or cfg_envs
+    torch.set_num_threads(1)  # as soft_snake_gym.training does
+    if kind == "batched":
+        venv = SoftVecEnv(env_id, n_envs=n_envs, seed=0, **env_kwargs)
+    else:
+        venv = make_vec_env(env_id, n_envs=n_envs, seed=0, env_kwargs=env_kwargs, vec_env_cls=SubprocVecEnv)
+    env = VecNormalize(venv)
+    try:
+        model = PPO("MlpPolicy", env, seed=0, device="cpu", verbose=0, **ppo_kwargs)
+        rollout = model.n_steps * n_envs
+        model.learn(rollout)  # warm-up: workers started, kernels loaded, torch initialized
+        timesteps = max(rollout, timesteps // rollout * rollout)
+        start = time.perf_counter()
+        model.learn(timesteps, reset_num_timesteps=False)
+        elapsed = time.perf_counter() - start
+    finally:
+        env.close()
+    return {"kind": kind, "n_envs": n_envs, "timesteps": timesteps, "seconds": elapsed,
+            "steps_per_s": timesteps / elapsed, "n_steps": ppo_kwargs.get("n_steps"),
+            "batch_size": ppo_kwargs.get("batch_size"), "n_epochs": ppo_kwargs.get("n_epochs")}
+
+
+# --- cost against N -------------------------------------------------------------------------
+def time_nodes(N: int, robots: int, seconds: float) -> dict[str, Any]:
+    """Microseconds per robot step of the batched eel with N nodes (same body, one thread)."""
+    import gymnasium as gym
+
+    from soft_snake_gym.gaits import serpenoid, serpenoid_phase
+
+    rod = {"N": N, "edge_length": 1.62 / (N - 1), "edge_mass": 7.2 / (N - 1)}
+    venv = gym.make_vec("SoftEel-v0", num_envs=robots, num_threads=1, rod=rod)
+    venv.reset(seed=0)
+    n, omega = N - 2, 2 * math.pi / 3
+    alpha = (math.pi / 6) * 8 / n  # the same body shape: the turning per node shrinks with 1/n
+    u = venv.envs[0]
+    t = (np.arange(200) + 0.5) * u.dt
+    rates = np.array([serpenoid(serpenoid_phase(ti, n, omega, 2 * math.pi / n), omega, alpha)[1] for ti in t])
+    actions = np.repeat((rates / u.max_curvature_rate)[:, None, :], robots, axis=1).astype(np.float32)
+    for a in actions[:2]:
+        venv.step(a)
+    steps, iters = 0, 0.0
+    start = time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        for a in actions[2:]:
+            _, _, _, _, info = venv.step(a)
+            iters += float(np.mean(info["newton_iterations"]))
+            steps += 1
+    elapsed = time.perf_counter() - start
+    us = elapsed / (steps * robots) * 1e6
+    return {"N": N, "robots": robots, "us_per_robot_step": us, "us_per_node_step": us / N,
+            "mean_newton_iterations": iters / steps}
+
+
+# --- the run ----------------------------------------------------------------------------------
+def run_benchmark(
+    seconds: float = 1.0,
+    repeats: int = 3,
+    robots: tuple[int, ...] = DEFAULT_ROBOTS,
+    sync_robots: int = 16,
+    ppo: bool = True,
+    ppo_timesteps: int = 8192,
+    ppo_n_envs: int | None = None,
+    nodes: tuple[int, ...] = DEFAULT_NODES,
+    node_robots: int = 64,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Run every case; returns the results (see :func:`format_report`)."""
+    import gymnasium as gym
+    import numba
+
+    import soft_snake_gym  # noqa: F401 - registers the ids
+    from soft_snake_gym.envs.vector import ROBOTS_PER_THREAD
+
+    say = progress or (lambda msg: None)
+    all_threads = numba.config.NUMBA_NUM_THREADS
+    cases: dict[str, Any] = {}
+    say("building the environments")
+    cases["SoftEel-v0 gym.make"] = _SingleCase("SoftEel-v0")
+    for n in robots:
+        # all cores only where the env's default would use them (>= 2 x ROBOTS_PER_THREAD robots)
+        for threads in sorted({1, all_threads if n >= 2 * ROBOTS_PER_THREAD else 1}):
+            cases[f"SoftEel-v0 batched n={n} threads={threads}"] = _VectorCase(
+                lambda n=n, threads=threads: gym.make_vec("SoftEel-v0", num_envs=n, num_threads=threads), n
+            )
+    mujoco_missing = _have_mujoco()
+    if mujoco_missing is None:
+        cases["Swimmer-v5 gym.make"] = _SingleCase("Swimmer-v5")
+        cases[f"Swimmer-v5 SyncVectorEnv n={sync_robots}"] = _VectorCase(
+            lambda: gym.make_vec("Swimmer-v5", num_envs=sync_robots, vectorization_mode="sync"), sync_robots
+        )
+    rates: dict[str, list[float]] = {name: [] for name in cases}
+    for r in range(repeats):
+        for name, case in cases.items():
+            say(f"round {r + 1}/{repeats}: {name}")
+            rates[name].append(case.run(seconds))
+    rows = []
+    for name, case in cases.items():
+        rows.append({"case": name, "robots": case.robots, "steps_per_s": statistics.median(rates[name]),
+                     "rounds": rates[name]})
+    shares = {}
+    for n in robots:
+        name = f"SoftEel-v0 batched n={n} threads=1"
+        say(f"kernel share: {name}")
+        shares[name] = _kernel_share(cases[name], seconds)
+    for case in cases.values():
+        case.env.close()
+
+    ppo_rows = []
+    if ppo:
+        for kind in ("batched", "subproc"):
+            say(f"PPO with the {kind} env")
+            ppo_rows.append(time_ppo(kind, "SoftEel-v0", ppo_n_envs, ppo_timesteps))
+    node_rows = []
+    for N in nodes:
+        say(f"cost per step at N = {N}")
+        node_rows.append(time_nodes(N, node_robots, seconds))
+
+    res: dict[str, Any] = {
+        "machine": {"platform": platform.platform(), "processor": platform.processor(),
+                    "cpus": __import__("os").cpu_count(), "numba_threads": all_threads,
+                    "threading_layer": _threading_layer()},
+        "settings": {"seconds": seconds, "repeats": repeats, "sync_robots": sync_robots,
+                     "ppo_timesteps": ppo_timesteps, "node_robots": node_robots},
+        "throughput": rows,
+        "kernel_share": shares,
+        "ppo": ppo_rows,
+        "nodes": node_rows,
+        "mujoco": mujoco_missing or "installed",
+    }
+    res["ratios"] = _ratios(res)
+    return res
+
+
+def _threading_layer() -> str:
+    import numba
+
+    try:
+        return numba.threading_layer()
+    except ValueError:
+        return "not initialized"
+
+
+def _rate(res: dict[str, Any], case: str) -> float | None:
+    return next((r["steps_per_s"] for r in res["throughput"] if r["case"] == case), None)
+
+
+def _ratios(res: dict[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    swimmer = _rate(res, "Swimmer-v5 gym.make")
+    single = _rate(res, "SoftEel-v0 gym.make")
+    batched = {r["case"]: r["steps_per_s"] for r in res["throughput"] if "batched n=256" in r["case"]}
+    if swimmer:
+        out["single_vs_swimmer"] = single / swimmer
+        if batched:
+            best = max(batched, key=batched.get)
+            out["batched256_vs_swimmer"] = batched[best] / swimmer
+            out["batched256_best_case"] = best
+            out["batched256_1thread_vs_swimmer"] = batched.get("SoftEel-v0 batched n=256 threads=1", 0) / swimmer
+    ppo = {r["kind"]: r["steps_per_s"] for r in res["ppo"]}
+    if "batched" in ppo and "subproc" in ppo:
+        out["ppo_batched_vs_subproc"] = ppo["batched"] / ppo["subproc"]
+    nodes = res["nodes"]
+    if len(nodes) >= 2:
+        first, last = nodes[0], nodes[-1]
+        out["cost_growth_vs_linear"] = (last["us_per_robot_step"] / first["us_per_robot_step"]) / (
+            last["N"] / first["N"]
+        )
+    return out
+
+
+def format_report(res: dict[str, Any]) -> str:
+    """The results as plain-text tables with the ratios and the targets."""
+    lines = [f"machine: {res['machine']['platform']}, {res['machine']['cpus']} CPUs, numba threads "
+             f"{res['machine']['numba_threads']} ({res['machine']['threading_layer']})"]
+    if res["mujoco"] != "installed":
+        lines.append(f"Swimmer-v5 rows skipped: {res['mujoco']}")
+    swimmer = _rate(res, "Swimmer-v5 gym.make")
+    lines += ["", f"{'case':<42} {'robot-steps/s':>14} {'vs Swimmer-v5':>14}  rounds"]
+    for r in res["throughput"]:
+        ratio = f"{r['steps_per_s'] / swimmer:>13.1f}x" if swimmer else f"{'-':>14}"
+        rounds = " ".join(f"{x:.0f}" for x in r["rounds"])
+        lines.append(f"{r['case']:<42} {r['steps_per_s']:>14,.0f} {ratio}  [{rounds}]")
+    if res["kernel_share"]:
+        lines += ["", "share of a batched step (1 thread) spent in the compiled call:"]
+        for name, share in res["kernel_share"].items():
+            lines.append(f"  {name:<40} {100 * share:5.1f} %")
+    if res["ppo"]:
+        lines += ["", f"{'PPO model.learn':<42} {'n_envs':>7} {'steps/s':>10} {'seconds':>8}"]
+        for r in res["ppo"]:
+            lines.append(f"{r['kind']:<42} {r['n_envs']:>7} {r['steps_per_s']:>10,.0f} {r['seconds']:>8.1f}")
+    if res["nodes"]:
+        lines += ["", f"{'N':>4} {'us/robot-step':>14} {'us/node-step':>13} {'Newton its':>11}"]
+        for r in res["nodes"]:
+            lines.append(f"{r['N']:>4} {r['us_per_robot_step']:>14.2f} {r['us_per_node_step']:>13.3f} "
+                         f"{r['mean_newton_iterations']:>11.2f}")
+    ratios = res["ratios"]
+    lines += ["", "targets (ratios measured in this run):"]
+    names = {"single_vs_swimmer": "SoftEel-v0 single env / Swimmer-v5 single env",
+             "batched256_vs_swimmer": "batched env, 256 robots / Swimmer-v5 single env",
+             "ppo_batched_vs_subproc": "PPO steps/s, batched / SubprocVecEnv"}
+    for key, target in TARGETS.items():
+        if key in ratios:
+            ok = "met" if ratios[key] >= target else f"MISSED by {100 * (1 - ratios[key] / target):.0f} %"
+            lines.append(f"  {names[key]:<50} {ratios[key]:6.2f}x  (target {target:g}x: {ok})")
+        else:
+            lines.append(f"  {names[key]:<50}   n/a  (not measured)")
+    if "batched256_1thread_vs_swimmer" in ratios:
+        lines.append(f"  {'  (one thread: ' + format(ratios['batched256_1thread_vs_swimmer'], '.2f') + 'x; best: ' + ratios['batched256_best_case'] + ')'}")
+    if "cost_growth_vs_linear" in ratios:
+        g = ratios["cost_growth_vs_linear"]
+        lines.append(f"  cost per robot step, N = {res['nodes'][-1]['N']} vs {res['nodes'][0]['N']}, over linear: "
+                     f"{g:.2f} ({'no faster than linear' if g <= 1.05 else 'FASTER than linear'})")
+    return "\n".join(lines)
+
+
+def plot_benchmark(res: dict[str, Any], path: str | Path) -> Path:
+    """Throughput bars (log scale) and cost per robot step against N, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.8), gridspec_kw={"width_ratios": [1.6, 1]})
+    rows = res["throughput"] + [{"case": f"PPO learn, {r['kind']} (n_envs={r['n_envs']})",
+                                 "steps_per_s": r["steps_per_s"]} for r in res["ppo"]]
+    names = [r["case"] for r in rows]
+    vals = [r["steps_per_s"] for r in rows]
+    colors = ["#1f77b4" if "SoftEel" in n else "#ff7f0e" if "Swimmer" in n else "#2ca02c" for n in names]
+    y = np.arange(len(rows))
+    ax1.barh(y, vals, color=colors)
+    ax1.set_yticks(y, names, fontsize=7)
+    ax1.invert_yaxis()
+    ax1.set_xscale("log")
+    ax1.set_xlabel("robot-steps per second (median round)")
+    swimmer = _rate(res, "Swimmer-v5 gym.make")
+    if swimmer:
+        ax1.axvline(swimmer, color="#ff7f0e", ls="--", lw=1)
+        ax1.axvline(10 * swimmer, color="#ff7f0e", ls=":", lw=1)
+        ax1.text(10 * swimmer, len(rows) - 0.5, " 10x Swimmer-v5", fontsize=7, color="#ff7f0e")
+    ax1.set_title("Throughput, one run, one machine", fontsize=10)
+    if res["nodes"]:
+        N = np.array([r["N"] for r in res["nodes"]], dtype=float)
+        us = np.array([r["us_per_robot_step"] for r in res["nodes"]])
+        ax2.loglog(N, us, "o-", label="batched SoftEel, 1 thread")
+        ax2.loglog(N, us[0] * N / N[0], "k--", lw=1, label="linear in N")
+        ax2.set_xlabel("nodes N")
+        ax2.set_ylabel("microseconds per robot step")
+        ax2.set_title(f"Cost per step against N ({res['nodes'][0]['robots']} robots)", fontsize=10)
+        ax2.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+# --- CLI --------------------------------------------------------------------------------------
+def _arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seconds", type=float, default=1.0, help="seconds per case per round (default 1)")
+    p.add_argument("--repeats", type=int, default=3, help="interleaved rounds; the median is reported (default 3)")
+    p.add_argument("--robots", type=int, nargs="+", default=list(DEFAULT_ROBOTS),
+                   help="robot counts of the batched env (default 1 16 256 1024)")
+    p.add_argument("--sync-robots", type=int, default=16, help="Swimmer-v5 SyncVectorEnv size (default 16)")
+    p.add_argument("--no-ppo", action="store_true", help="skip the PPO training comparison")
+    p.add_argument("--ppo-timesteps", type=int, default=8192, help="timed PPO steps per env kind (default 8192)")
+    p.add_argument("--ppo-n-envs", type=int, default=None, help="PPO n_envs (default: the PPO config's, 8)")
+    p.add_argument("--nodes", type=int, nargs="*", default=list(DEFAULT_NODES),
+                   help="node counts for the cost-against-N rows (default 10 20 50 100)")
+    p.add_argument("--node-robots", type=int, default=64, help="robots in the cost-against-N rows (default 64)")
+    p.add_argument("--json", default="benchmark.json", help="results file (default benchmark.json)")
+    p.add_argument("--png", default=None, help="figure (default: the JSON's name with .png)")
+    p.add_argument("--quiet", action="store_true", help="no progress messages")
+
+
+@subcommand("benchmark", "steps per second of the envs, batched env, PPO, against MuJoCo's Swimmer-v5",
+            _arguments)
+def _benchmark(args: argparse.Namespace) -> int:
+    import sys
+
+    if args.seconds <= 0 or args.repeats < 1:
+        raise CLIError(f"--seconds {args.seconds} and --repeats {args.repeats}: need seconds > 0 and repeats >= 1")
+    bad = [n for n in args.robots + [args.sync_robots, args.node_robots] if n < 1] + [N for N in args.nodes if N < 3]
+    if bad:
+        raise CLIError(f"robot counts must be >= 1 and node counts >= 3; got {bad}")
+    if args.ppo_timesteps < 1:
+        raise CLIError(f"--ppo-timesteps {args.ppo_timesteps}: need >= 1")
+
+    def progress(msg: str) -> None:
+        if not args.quiet:
+            print(f"[benchmark] {msg}", file=sys.stderr, flush=True)
+
+    res = run_benchmark(seconds=args.seconds, repeats=args.repeats, robots=tuple(args.robots),
+                        sync_robots=args.sync_robots, ppo=not args.no_ppo, ppo_timesteps=args.ppo_timesteps,
+                        ppo_n_envs=args.ppo_n_envs, nodes=tuple(args.nodes), node_robots=args.node_robots,
+                        progress=progress)
+    report = format_report(res)
+    res["report"] = report
+    json_path = Path(args.json)
+    json_path.parent.mkdir(parents=True, exist_ok=True)
+    json_path.write_text(json.dumps(res, indent=2))
+    png = plot_benchmark(res, args.png or json_path.with_suffix(".png"))
+    print(report)
+    print(f"\nwrote {json_path} and {png}")
+    return 0
