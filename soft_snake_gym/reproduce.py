@@ -249,8 +249,44 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
     return out
 
 
+def _land_numbers(inch: list[dict[str, Any]]) -> dict[str, Any]:
+    """The open-loop distance along the lowest-mu_d row and the highest-mu_s column."""
+    ol = [r for r in inch if r["controller"] == "inching" and not r.get("failure")]
+    if not ol:
+        nan = math.nan
+        return {
+            "energy_low": "no data",
+            "mu_d_low": nan,
+            "row_low": "-",
+            "mu_s_list": "-",
+            "mu_s_high": nan,
+            "col_high": "-",
+            "mu_d_list": "-",
+        }
+    md_lo = min(r["mu_d"] for r in ol)
+    ms_hi = max(r["mu_s"] for r in ol)
+    row = sorted((r["mu_s"], r["distance"], r["energy_friction"]) for r in ol if r["mu_d"] == md_lo)
+    col = sorted((r["mu_d"], r["distance"]) for r in ol if r["mu_s"] == ms_hi)
+    energies = [e for _, _, e in row]
+    return {
+        "energy_low": (
+            f"{min(energies):.1f} J"
+            if f"{min(energies):.1f}" == f"{max(energies):.1f}"
+            else f"{min(energies):.1f}-{max(energies):.1f} J"
+        )
+        + f" at mu_d = {md_lo:.2f} for every mu_s",
+        "mu_d_low": md_lo,
+        "row_low": ", ".join(f"{d:.3f}" for _, d, _ in row),
+        "mu_s_list": ", ".join(f"{m:.2f}" for m, _, _ in row),
+        "mu_s_high": ms_hi,
+        "col_high": ", ".join(f"{d:.3f}" for _, d in col),
+        "mu_d_list": ", ".join(f"{m:.2f}" for m, _ in col),
+    }
+
+
 def write_report(path: Path, img: Path, facts: list[dict[str, str]], extras: dict[str, Any]) -> Path:
     """Write the Markdown report (figures are linked relative to it)."""
+    land = extras.get("land") or _land_numbers([])
     rel = img.relative_to(path.parent) if img.is_relative_to(path.parent) else img
 
     def fig(name: str, caption: str) -> str:
@@ -296,17 +332,19 @@ marked "fail" in the heatmaps.
   gait, and the integral term then adds phase lag. Feedback still buys speed in most cells
   at a higher energy cost. At the default stiffness (1.875e6 Pa) the PID does cut the error,
   from 0.0196 (open loop) to 0.0070 (`soft-snake evaluate SoftEel-v0 --policy open-loop` / `pid`).
-- **Static friction on land.** With the default wave (omega = 2 pi rad/s) the nodes slide almost
-  all the time: each node is stuck (|v| < V_tol = 1 mm/s and the other forces within mu_s m g)
-  only about 2 % of the steps, so mu_s hardly matters and the friction energy is
-  `mu_d m g x (path length)`, independent of mu_s. With a slower wave static friction does act,
-  but in this model it shortens the stroke rather than anchoring it: at omega = pi/2 rad/s the
-  open loop goes 0.056, 0.016 and 0.006 m in 10 s at mu_s = 0.4, 0.8, 1.2 (mu_d = 0.2), i.e.
-  more static friction goes *less* far, while less kinetic friction does go further (0.016 m at
-  mu_d = 0.2 vs 0.0155 at 0.4 and mu_s = 0.8; 0.0055, 0.0079, 0.0059 m at mu_s = 1.2 and mu_d
-  = 0.2, 0.4, 0.8). Reproduce with e.g. `soft-snake evaluate SoftWorm-v0 --policy
+- **Friction on land.** With the default wave (omega = 2 pi rad/s) the nodes slide most of the
+  time: a node is stuck (|v| < V_tol = 1 mm/s and the other forces within mu_s m g) in only about
+  2 % of the steps, so the friction energy is `mu_d m g x (path length)` and does not depend on
+  mu_s ({land["energy_low"]}). Static friction matters only where kinetic friction is low: at
+  mu_d = {land["mu_d_low"]:.2f} the open-loop distance goes {land["row_low"]} m for mu_s = {land["mu_s_list"]};
+  at higher mu_d it hardly changes with mu_s. Kinetic friction, against the thesis, helps: at
+  mu_s = {land["mu_s_high"]:.2f} the open loop goes {land["col_high"]} m for mu_d = {land["mu_d_list"]}. In this
+  model the sliding nodes push off the ground through kinetic friction, so more of it gives
+  more thrust (and proportionally more friction energy). A slower wave does not turn this
+  round: at omega = pi/2 rad/s the open loop barely moves (0.006, -0.0002 and -0.011 m in 10 s at
+  mu_s = 0.4, 0.8, 1.2 with mu_d = 0.2; reproduce with `soft-snake evaluate SoftWorm-v0 --policy
   inching:omega=pi/2 --episodes 1 --env-kwarg ground.mu_s=0.8 --env-kwarg ground.mu_d=0.2
-  --env-kwarg reset_noise_scale=0`.
+  --env-kwarg reset_noise_scale=0`).
 - **Decentralized gains.** See the last section: with (10, 1, 5) the neighbour-to-neighbour
   chain does not settle; with (10, 2, 1) it does, as the thesis describes.
 
@@ -332,7 +370,7 @@ marked "fail" in the heatmaps.
 |---|---|---|---|---|
 {timings}
 
-A fresh `soft-snake reproduce --out docs` (no CSVs) took 2 min 48 s of wall time on 2 worker
+A fresh `soft-snake reproduce --out docs` (no CSVs) took 2 min 37 s of wall time on 2 worker
 processes (the first cell of each worker also pays for importing torch and SB3, about 2 s);
 a rerun with the CSVs in place recomputes nothing and takes about 8 s (the figures).
 
@@ -399,6 +437,7 @@ def reproduce(out: str | Path = "docs", workers: int | None = None, progress: bo
         f"mu {grid.n_mu} values in [{grid.mu_s_min}, {grid.mu_s_max}] with mu_d <= mu_s"
     )
     facts = findings(rows["swim-gait"], rows["swim-stiffness"], rows["inch-friction"])
+    extras["land"] = _land_numbers(rows["inch-friction"])
     return write_report(out / "thesis_reproduction.md", img, facts, extras)
 
 

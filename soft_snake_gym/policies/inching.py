@@ -5,7 +5,8 @@
 Measured direction (thesis worm, mu_s = 1.15, mu_d = 0.8, 10 s, open loop, eps = 0.3,
 omega = 2 pi): with ``direction = +1`` (the wave travels from tail to head) and
 ``delta_l = 2 pi / 9`` (one wave along the 9 edges) the worm moves **forward, toward the
-head**, by about 0.11 m; ``direction = -1`` moves it backward by the same amount. For
+head**, by 0.10 m (0.08 m with the bare law ``u = lbar_dot_des`` from the straight start, and
+only 0.005 m at mu_d = 0.2; see ``rest_gain``); ``direction = -1`` moves it backward by 0.09 m. For
 ``delta_l`` above pi the direction flips (the wave aliases to the other direction). These are
 the defaults.
 """
