@@ -15,7 +15,8 @@ numbers move with the load:
     (the same 1.62 m, 7.2 kg body cut into N - 1 edges, swimming the thesis's serpenoid gait).
 
 Throughput cases drive every env with uniform random actions in [-1, 1] (an untrained
-policy), resetting when an episode ends. The cases are interleaved over ``repeats`` rounds
+policy), resetting when an episode ends; one extra row drives 256 batched eels with the
+thesis gait (a smooth policy: fewer Newton iterations per step). The cases are interleaved over ``repeats`` rounds
 and each reports the median round, so a load change during the run hits all of them alike.
 Results go to a JSON file and a PNG figure.
 """
@@ -73,11 +74,13 @@ class _SingleCase:
 class _VectorCase:
     """A vector env (batched or ``SyncVectorEnv``) with autoreset; rate in robot-steps/s."""
 
-    def __init__(self, make: Callable[[], Any], robots: int) -> None:
+    def __init__(self, make: Callable[[], Any], robots: int, actions: np.ndarray | None = None) -> None:
         self.env = make()
         self.env.reset(seed=0)
         rng = np.random.default_rng(0)
-        self.actions = rng.uniform(-1, 1, (32,) + self.env.action_space.shape).astype(np.float32)
+        if actions is None:
+            actions = rng.uniform(-1, 1, (32,) + self.env.action_space.shape).astype(np.float32)
+        self.actions = actions
         self.robots = robots
         for a in self.actions[:2]:  # load the compiled code
             self.env.step(a)
@@ -92,6 +95,17 @@ class _VectorCase:
             elapsed = time.perf_counter() - start
             if elapsed >= seconds:
                 return steps * self.robots / elapsed
+
+
+def _gait_actions(robots: int, n: int = 8, steps: int = 300) -> np.ndarray:
+    """The thesis serpenoid (alpha = pi/6, omega = 2 pi/3) as normalized SoftEel-v0 actions
+    of ``robots`` eels of ``n + 2`` nodes, (steps, robots, n) float32."""
+    from soft_snake_gym.gaits import serpenoid, serpenoid_phase
+
+    alpha, omega = (math.pi / 6) * 8 / n, 2 * math.pi / 3  # the same body shape at any n
+    t = (np.arange(steps) + 0.5) * 0.01
+    rates = np.array([serpenoid(serpenoid_phase(ti, n, omega, 2 * math.pi / n), omega, alpha)[1] for ti in t])
+    return np.repeat((rates / (2 * math.pi))[:, None, :], robots, axis=1).astype(np.float32)
 
 
 def _kernel_share(case: _VectorCase, seconds: float) -> float:
@@ -167,17 +181,10 @@ def time_nodes(N: int, robots: int, seconds: float) -> dict[str, Any]:
     """Microseconds per robot step of the batched eel with N nodes (same body, one thread)."""
     import gymnasium as gym
 
-    from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-
     rod = {"N": N, "edge_length": 1.62 / (N - 1), "edge_mass": 7.2 / (N - 1)}
     venv = gym.make_vec("SoftEel-v0", num_envs=robots, num_threads=1, rod=rod)
     venv.reset(seed=0)
-    n, omega = N - 2, 2 * math.pi / 3
-    alpha = (math.pi / 6) * 8 / n  # the same body shape: the turning per node shrinks with 1/n
-    u = venv.envs[0]
-    t = (np.arange(200) + 0.5) * u.dt
-    rates = np.array([serpenoid(serpenoid_phase(ti, n, omega, 2 * math.pi / n), omega, alpha)[1] for ti in t])
-    actions = np.repeat((rates / u.max_curvature_rate)[:, None, :], robots, axis=1).astype(np.float32)
+    actions = _gait_actions(robots, N - 2, 300)
     for a in actions[:2]:
         venv.step(a)
     steps, iters = 0, 0.0
@@ -224,6 +231,10 @@ def run_benchmark(
             cases[f"SoftEel-v0 batched n={n} threads={threads}"] = _VectorCase(
                 lambda n=n, threads=threads: gym.make_vec("SoftEel-v0", num_envs=n, num_threads=threads), n
             )
+    if 256 in robots:  # a smooth policy: the thesis gait (fewer Newton iterations per step)
+        cases["SoftEel-v0 batched n=256 threads=1, gait actions"] = _VectorCase(
+            lambda: gym.make_vec("SoftEel-v0", num_envs=256, num_threads=1), 256, _gait_actions(256)
+        )
     mujoco_missing = _have_mujoco()
     if mujoco_missing is None:
         cases["Swimmer-v5 gym.make"] = _SingleCase("Swimmer-v5")
@@ -290,7 +301,9 @@ def _ratios(res: dict[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     swimmer = _rate(res, "Swimmer-v5 gym.make")
     single = _rate(res, "SoftEel-v0 gym.make")
-    batched = {r["case"]: r["steps_per_s"] for r in res["throughput"] if "batched n=256" in r["case"]}
+    batched = {r["case"]: r["steps_per_s"] for r in res["throughput"]
+               if "batched n=256" in r["case"] and "gait" not in r["case"]}
+    gait = _rate(res, "SoftEel-v0 batched n=256 threads=1, gait actions")
     if swimmer:
         out["single_vs_swimmer"] = single / swimmer
         if batched:
@@ -298,6 +311,8 @@ def _ratios(res: dict[str, Any]) -> dict[str, Any]:
             out["batched256_vs_swimmer"] = batched[best] / swimmer
             out["batched256_best_case"] = best
             out["batched256_1thread_vs_swimmer"] = batched.get("SoftEel-v0 batched n=256 threads=1", 0) / swimmer
+        if gait:
+            out["batched256_gait_vs_swimmer"] = gait / swimmer
     ppo = {r["kind"]: r["steps_per_s"] for r in res["ppo"]}
     if "batched" in ppo and "subproc" in ppo:
         out["ppo_batched_vs_subproc"] = ppo["batched"] / ppo["subproc"]
@@ -317,11 +332,11 @@ def format_report(res: dict[str, Any]) -> str:
     if res["mujoco"] != "installed":
         lines.append(f"Swimmer-v5 rows skipped: {res['mujoco']}")
     swimmer = _rate(res, "Swimmer-v5 gym.make")
-    lines += ["", f"{'case':<42} {'robot-steps/s':>14} {'vs Swimmer-v5':>14}  rounds"]
+    lines += ["", f"{'case':<50} {'robot-steps/s':>14} {'vs Swimmer-v5':>14}  rounds"]
     for r in res["throughput"]:
         ratio = f"{r['steps_per_s'] / swimmer:>13.1f}x" if swimmer else f"{'-':>14}"
         rounds = " ".join(f"{x:.0f}" for x in r["rounds"])
-        lines.append(f"{r['case']:<42} {r['steps_per_s']:>14,.0f} {ratio}  [{rounds}]")
+        lines.append(f"{r['case']:<50} {r['steps_per_s']:>14,.0f} {ratio}  [{rounds}]")
     if res["kernel_share"]:
         lines += ["", "share of a batched step (1 thread) spent in the compiled call:"]
         for name, share in res["kernel_share"].items():
@@ -347,7 +362,10 @@ def format_report(res: dict[str, Any]) -> str:
         else:
             lines.append(f"  {names[key]:<50}   n/a  (not measured)")
     if "batched256_1thread_vs_swimmer" in ratios:
-        lines.append(f"  {'  (one thread: ' + format(ratios['batched256_1thread_vs_swimmer'], '.2f') + 'x; best: ' + ratios['batched256_best_case'] + ')'}")
+        lines.append(f"    (random actions; one thread: {ratios['batched256_1thread_vs_swimmer']:.2f}x; best: "
+                     f"{ratios['batched256_best_case']})")
+    if "batched256_gait_vs_swimmer" in ratios:
+        lines.append(f"    (with the thesis gait instead of random actions: {ratios['batched256_gait_vs_swimmer']:.2f}x)")
     if "cost_growth_vs_linear" in ratios:
         g = ratios["cost_growth_vs_linear"]
         lines.append(f"  cost per robot step, N = {res['nodes'][-1]['N']} vs {res['nodes'][0]['N']}, over linear: "
