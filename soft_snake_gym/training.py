@@ -467,22 +467,24 @@ def _git_commit() -> str | None:
 
 
 def _record_resume(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> bool:
-    """Append the resuming command to command.txt; if the settings changed (a curriculum:
-    ``--resume DIR --hyperparams ...``), keep the earlier config.yaml as config.<k>.yaml and
-    return True (a new stage begins)."""
+    """Append the resuming command to command.txt. If settings other than ``n_timesteps``
+    changed (a curriculum: ``--resume DIR --hyperparams ...``), keep the earlier config.yaml
+    as config.<k>.yaml and return True: a new stage begins."""
     with open(run_dir / "command.txt", "a") as fh:
         fh.write(shlex.join(command if command is not None else sys.argv) + "\n")
-    new = yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False)
     path = run_dir / "config.yaml"
-    if path.is_file() and path.read_text() != new:
+
+    def settings(data: dict[str, Any]) -> dict[str, Any]:
+        return {k: v for k, v in next(iter(data.values())).items() if k != "n_timesteps"}
+
+    new_stage = path.is_file() and settings(load_yaml(path)) != settings(cfg.to_yaml_dict())
+    if new_stage:
         k = 1
         while (run_dir / f"config.{k}.yaml").exists():
             k += 1
         path.rename(run_dir / f"config.{k}.yaml")
-        path.write_text(new)
-        return True
-    path.write_text(new)
-    return False
+    path.write_text(yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False))
+    return new_stage
 
 
 def _write_run_files(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> None:

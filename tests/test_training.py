@@ -72,11 +72,16 @@ def test_evaluate_loads_the_run_and_resume_continues_it(trained_run):
         "max_episode_steps": 100, "energy_cost_weight": 0.01}
     assert (trained_run / "config.1.yaml").is_file()
     assert len((trained_run / "command.txt").read_text().splitlines()) == 2
+    # running longer with the same settings is the same stage: no new config.<k>.yaml
+    out = cli("train", "--resume", str(trained_run), "--n-timesteps", "448", "--no-progress")
+    assert out.returncode == 0, out.stderr
+    assert not (trained_run / "config.2.yaml").exists()
+    assert load_train_config("SoftEel-v0", path=trained_run / "config.yaml").n_timesteps == 448
     assert (trained_run / "checkpoints" / "model_384_steps.zip").is_file()
     assert (trained_run / "progress.1.csv").is_file()  # the first part's log is kept
     with open(trained_run / "learning_curve.csv") as fh:
         steps = [int(r["timesteps"]) for r in csv.DictReader(fh)]
-    assert steps[-1] == 384 and steps == sorted(steps)
+    assert steps[-1] >= 448 and steps == sorted(steps)
 
 
 def test_ctrl_c_keeps_a_checkpoint_that_resumes(tmp_path):
