@@ -84,6 +84,22 @@ def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_i
     assert ends["truncated"] >= 2
 
 
+@pytest.mark.parametrize("env_id", IDS)
+def test_returns_follow_the_batched_spaces_and_types(env_id):
+    venv = SoftVectorEnv(env_id, 3)
+    obs, info = venv.reset(seed=0)
+    assert obs.dtype == np.float32 and venv.observation_space.contains(obs)
+    assert isinstance(info, dict) and info["_x_position"].all()
+    for a in _actions(venv.action_space, 5, seed=0):
+        obs, rew, term, trunc, info = venv.step(np.where(a >= 0, 3.0, -3.0))  # clipped to +-1
+        assert venv.observation_space.contains(obs)
+        assert rew.shape == (3,) and rew.dtype == np.float64
+        assert term.dtype == np.bool_ and trunc.dtype == np.bool_ and term.shape == trunc.shape == (3,)
+        n_act = venv.single_action_space.shape[0]
+        assert np.all(np.abs(info["reward_ctrl"] + venv.settings.ctrl_cost_weight * n_act) < 1e-12)
+    venv.close()
+
+
 def test_autoreset_next_step_returns_the_last_obs_then_a_reset_robot():
     venv = SoftVectorEnv("SoftEel-v0", 2, max_episode_steps=3)
     venv.reset(seed=0)
@@ -263,3 +279,14 @@ def test_sb3_step_info_gives_the_single_env_info():
         _, _, _, infos = env.step(act)
         _, _, _, _, info = single.step(act[1])
     assert data_equivalence(infos[1], info, exact=True)
+
+
+def test_training_config_offers_the_batched_env():
+    from soft_snake_gym.sb3 import SoftVecEnv
+    from soft_snake_gym.training import TrainConfig, make_train_env
+
+    env = make_train_env(TrainConfig(env_id="SoftWorm-v0", vec_env="batched", n_envs=3), seed=5)
+    assert isinstance(env, SoftVecEnv) and env.num_envs == 3
+    obs = env.reset()
+    single = gym.make("SoftWorm-v0")
+    assert np.array_equal(obs[2], single.reset(seed=7)[0])  # seeded seed + i, as make_vec_env
