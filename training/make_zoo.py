@@ -1,8 +1,9 @@
 """Train the agents shipped in soft_snake_gym/zoo and write the figures of docs/training.md.
 
 Runs the exact commands recorded in the run folders (the eel with a two-stage energy
-curriculum, the worm in one stage), copies each final model with its VecNormalize
-statistics and config into the package, plots the learning curves, and compares the shipped
+curriculum, the worm in one stage), copies each run's best model (by evaluation return on
+its own evaluation seeds, in its last stage) with its VecNormalize statistics and config into
+the package, plots the learning curves, and compares the shipped
 agents with the baselines on 10 seeds.
 
     python training/make_zoo.py                 # everything (about 40 min on 2 cores)
@@ -52,8 +53,10 @@ def main() -> None:
                 soft_snake("train", "--resume", str(run), "--no-progress", *stage)
         dest = ZOO / env_id / "ppo"
         dest.mkdir(parents=True, exist_ok=True)
-        shutil.copy(run / "final_model.zip", dest / "model.zip")
-        shutil.copy(run / "vecnormalize.pkl", dest / "vecnormalize.pkl")
+        # the best evaluation of the last stage, on the training run's evaluation seeds
+        # (1000...); the comparison below uses other seeds (0..9)
+        shutil.copy(run / "best_model.zip", dest / "model.zip")
+        shutil.copy(run / "best_vecnormalize.pkl", dest / "vecnormalize.pkl")
         for name in ("config.yaml", "command.txt", "meta.json", "learning_curve.csv"):
             shutil.copy(run / name, dest / name)
         plot_learning_curve(run, DOCS / f"learning_curve_{env_id}.png")
