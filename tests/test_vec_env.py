@@ -55,15 +55,17 @@ def test_make_vec_returns_the_batched_env_with_batched_spaces(env_id):
     assert isinstance(gym.make_vec(env_id, num_envs=2, vectorization_mode="sync"), SyncVectorEnv)
 
 
-@pytest.mark.parametrize("env_id", IDS)
-def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_id):
+@pytest.mark.parametrize(("env_id", "mode"), [(i, AutoresetMode.NEXT_STEP) for i in IDS]
+                         + [("SoftEel-v0", AutoresetMode.SAME_STEP)])
+def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_id, mode):
     """Robot i seeded s + i, with the same actions, is the single env seeded s + i: obs,
     rewards, ends, every info entry and the episode statistics, across failures, time limits
-    and autoresets (with physics randomization drawn anew at each)."""
-    n, steps, kw = 4, 500, ENDS[env_id]
-    batched = gym.make_vec(env_id, num_envs=n, max_episode_steps=90, **kw)
+    and autoresets (with physics randomization drawn anew at each), in both autoreset modes."""
+    n, steps, kw = 4, 500 if mode == AutoresetMode.NEXT_STEP else 250, ENDS[env_id]
+    batched = gym.make_vec(env_id, num_envs=n, max_episode_steps=90, autoreset_mode=mode, **kw)
     sync = RecordEpisodeStatistics(
-        gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", max_episode_steps=90, **kw)
+        gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", max_episode_steps=90,
+                     vector_kwargs={"autoreset_mode": mode}, **kw)
     )
     obs_b, info_b = batched.reset(seed=11)
     obs_s, info_s = sync.reset(seed=11)
