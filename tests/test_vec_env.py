@@ -79,6 +79,8 @@ def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_i
         for x, y, what in zip(out_b[:4], out_s[:4], ("obs", "reward", "terminated", "truncated"), strict=True):
             assert data_equivalence(x, y, exact=True), what
         assert data_equivalence(_drop_times(out_b[4]), _drop_times(out_s[4]), exact=True)
+        assert np.array_equal(out_b[0].view(np.int32), out_s[0].view(np.int32))  # signed zeros too
+        assert np.array_equal(out_b[1].view(np.int64), out_s[1].view(np.int64))
         ends["terminated"] += int(out_b[2].sum())
         ends["truncated"] += int(out_b[3].sum())
     if env_id == "SoftEel-v0":
