@@ -107,7 +107,7 @@ def _metrics(out, prm, tp, rs):
     dx = rs[R_COMX] - rs[R_COM0X]
     dy = rs[R_COMY] - rs[R_COM0Y]
     distance = dx * tp[T_GCOS] + dy * tp[T_GSIN]
-    duration = out[K.O_TIME]
+    duration = out[K.O_NSTEPS] * prm[K.P_H]
     ground = int(prm[K.P_MEDIUM]) == K.MEDIUM_GROUND
     rs[M_AVG] = distance / duration if duration > 0.0 else 0.0
     rs[M_DIST] = distance

@@ -45,8 +45,8 @@ SLIDING, STUCK, BREAKAWAY = 0, 1, 2
 
 # --- diagnostics -----------------------------------------------------------------------------
 (O_STATUS, O_NITER, O_RESIDUAL, O_P_FLUID, O_P_FRICTION, O_P_ACT, O_E_FLUID, O_E_FRICTION,
- O_E_ACT, O_W_ACT, O_TIME, O_NSTEPS) = range(12)
-N_OUT = 12
+ O_E_ACT, O_W_ACT, O_NSTEPS) = range(11)
+N_OUT = 11  # simulated time is O_NSTEPS * h: derived, so it cannot drift
 
 # --- status codes ----------------------------------------------------------------------------
 OK, NOT_CONVERGED, NON_FINITE, SELF_INTERSECTION, RUNAWAY_STRETCH, BAD_REST_LENGTH = range(6)
@@ -429,9 +429,16 @@ def _classify_friction(q, v, kbar, lbar, prm, buf, J, ibuf):
             v[2 * i] = 0.0
             v[2 * i + 1] = 0.0
         else:
-            state[i] = BREAKAWAY
-            fbrk[2 * i] = -prm[P_MUD] * fn * F[2 * i] / fo
-            fbrk[2 * i + 1] = -prm[P_MUD] * fn * F[2 * i + 1] / fo
+            _break_away(i, fn, fo, F, fbrk, state, prm)
+
+
+@njit(cache=True, error_model="numpy")
+def _break_away(i, fn, fo, F, fbrk, state, prm):
+    """Node i breaks away: kinetic friction ``mu_d F_N`` against its other forces ``F``
+    (magnitude ``fo``), held constant over the step."""
+    state[i] = BREAKAWAY
+    fbrk[2 * i] = -prm[P_MUD] * fn * F[2 * i] / fo
+    fbrk[2 * i + 1] = -prm[P_MUD] * fn * F[2 * i + 1] / fo
 
 
 @njit(cache=True, error_model="numpy")
@@ -509,9 +516,7 @@ def _release_overloaded(buf, ibuf, prm, n):
         fn = m[2 * i] * prm[P_G]
         fo = math.hypot(F[2 * i], F[2 * i + 1])
         if fo > prm[P_MUS] * fn:
-            state[i] = BREAKAWAY
-            fbrk[2 * i] = -prm[P_MUD] * fn * F[2 * i] / fo
-            fbrk[2 * i + 1] = -prm[P_MUD] * fn * F[2 * i + 1] / fo
+            _break_away(i, fn, fo, F, fbrk, state, prm)
             released = True
     return released
 
@@ -689,7 +694,6 @@ def simulate(q, v, kbar, lbar, u_k, u_l, prm, buf, J, ibuf, out, n_steps):
         out[O_E_FRICTION] += e_fric
         out[O_E_ACT] += abs(e_act)
         out[O_W_ACT] += e_act
-        out[O_TIME] += h
         out[O_NSTEPS] += 1
         if status != OK:
             return status
