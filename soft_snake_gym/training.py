@@ -299,7 +299,7 @@ def _find_model(path: Path) -> tuple[Path, Path | None]:
     return path, None
 
 
-def load_trained(path: str | Path, env: Any | None = None) -> TrainedPolicy:
+def load_trained(path: str | Path, env: Any) -> TrainedPolicy:
     """Load a trained agent from a run folder or a model zip (with the VecNormalize
     statistics saved beside it) as a :class:`TrainedPolicy`.
 
@@ -312,7 +312,7 @@ def load_trained(path: str | Path, env: Any | None = None) -> TrainedPolicy:
     from soft_snake_gym.policies import load_model
 
     model_path, stats_path = _find_model(Path(path))
-    model = load_model(model_path, env) if env is not None else _load_any(model_path)
+    model = load_model(model_path, env)
     obs_rms, clip = None, 10.0
     if stats_path is not None:
         with open(stats_path, "rb") as fh:
@@ -320,17 +320,6 @@ def load_trained(path: str | Path, env: Any | None = None) -> TrainedPolicy:
         if getattr(vn, "norm_obs", True):
             obs_rms, clip = vn.obs_rms, vn.clip_obs
     return TrainedPolicy(model, obs_rms, clip, name=str(path))
-
-
-def _load_any(path: Path):
-    import stable_baselines3 as sb3
-
-    for algo in ALGOS:
-        try:
-            return getattr(sb3, algo).load(path, device="cpu")
-        except Exception:  # noqa: BLE001 - try the next algorithm
-            continue
-    raise ConfigError(f"{str(path)!r} is not a loadable PPO or SAC model")
 
 
 ZOO = Path(__file__).resolve().parent / "zoo"
@@ -359,9 +348,10 @@ def latest_checkpoint(run_dir: Path) -> tuple[Path, Path | None] | None:
 
 
 # --- callbacks ------------------------------------------------------------------------------
-def _make_callbacks(cfg: TrainConfig, run_dir: Path, train_env, stage_start: int = 0):
-    """Checkpoints and the baseline evaluation; the best model is the best evaluation since
-    ``stage_start`` (returns of a curriculum's earlier stages used other rewards)."""
+def _make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start: int = 0):
+    """Checkpoints and the baseline evaluation; ``wall_s`` counts from ``started``; the best
+    model is the best evaluation since ``stage_start`` (returns of a curriculum's earlier
+    stages used other rewards)."""
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
     from soft_snake_gym.evaluation import evaluate, make_eval_env, summarize
@@ -412,7 +402,7 @@ def _make_callbacks(cfg: TrainConfig, run_dir: Path, train_env, stage_start: int
             agent = TrainedPolicy(self.model, vn.obs_rms if vn is not None else None,
                                   vn.clip_obs if vn is not None else 10.0)
             scores = self._score(agent)
-            row = {"timesteps": self.num_timesteps, "wall_s": round(time.time() - START[0], 1)}
+            row = {"timesteps": self.num_timesteps, "wall_s": round(time.time() - started, 1)}
             for key in ("return", "average_speed", "cost_of_transport"):
                 row[f"{key}_mean"], row[f"{key}_std"] = scores.get(key, (math.nan, math.nan))
                 self.logger.record(f"eval/{key}", row[f"{key}_mean"])
@@ -438,9 +428,6 @@ def _make_callbacks(cfg: TrainConfig, run_dir: Path, train_env, stage_start: int
                 self._on_step()
 
     return CallbackList([Checkpoint(), BaselineEval()])
-
-
-START = [time.time()]
 
 
 def save_checkpoint(model, run_dir: Path) -> Path:
@@ -541,7 +528,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress:
 
     _check_env_id(cfg.env_id)
     run_dir = Path(run_dir)
-    START[0] = time.time()
+    started = time.time()
     torch.set_num_threads(1)  # small MLPs: threads cost more than they give on 2 cores
     algo = _algo_class(cfg.algo)
     if resume:
@@ -579,7 +566,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress:
             raise ConfigError(f"{cfg.algo} rejected the configuration: {err}") from None
         remaining = cfg.n_timesteps
     model.set_logger(_make_logger(run_dir))
-    callbacks = _make_callbacks(cfg, run_dir, env, stage_start)
+    callbacks = _make_callbacks(cfg, run_dir, started, stage_start)
     try:
         if remaining > 0:
             model.learn(remaining, callback=callbacks, reset_num_timesteps=not resume,

@@ -434,10 +434,6 @@ class SoftRobotEnv(gym.Env):
         """Centre of mass at the last valid state, (2,) [m]."""
         return self._rs[T.R_COMX : T.R_COMY + 1].copy()
 
-    @property
-    def _heading(self) -> float:
-        return float(self._rs[T.R_HEADING])
-
     def _record_trail(self) -> None:
         if self.render_mode is None:
             return

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 
@@ -174,8 +173,6 @@ class Simulator:
          self._out) = _arrays
         self._zero_k = np.zeros(N - 2)
         self._zero_l = np.zeros(N - 1)
-        self._scratch_k = np.zeros(N - 2)
-        self._scratch_l = np.zeros(N - 1)
         self.failure: str | None = None
         self.set_config(config)
         self.reset()
@@ -193,10 +190,6 @@ class Simulator:
         self._m = node_masses(config)
         self._buf[K.B_M, 0::2] = self._m
         self._buf[K.B_M, 1::2] = self._m
-
-    def replace_config(self, **sections) -> None:
-        """Shortcut: ``sim.replace_config(fluid=Fluid(rho=0))``."""
-        self.set_config(replace(self.config, **sections))
 
     @property
     def h(self) -> float:

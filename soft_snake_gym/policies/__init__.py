@@ -11,7 +11,14 @@ from pathlib import Path
 from typing import Any
 
 from soft_snake_gym.config import ConfigError, load_yaml
-from soft_snake_gym.policies.base import BaselinePolicy, EnvLayout, PolicyEnvMismatch, env_layout, parse_value
+from soft_snake_gym.policies.base import (
+    BaselinePolicy,
+    EnvLayout,
+    PolicyEnvMismatch,
+    _unwrap_one,
+    env_layout,
+    parse_value,
+)
 from soft_snake_gym.policies.decentralized import DecentralizedPhasePID
 from soft_snake_gym.policies.inching import InchingPID, InchingWave
 from soft_snake_gym.policies.open_loop import OpenLoopSerpenoid
@@ -102,12 +109,6 @@ def load_model(path: str | Path, env: Any) -> Any:
     return model
 
 
-def _env_id(env: Any) -> str:
-    inner = env.envs[0] if hasattr(env, "envs") else env
-    spec = getattr(inner.unwrapped, "spec", None) or getattr(inner, "spec", None)
-    return spec.id if spec is not None else inner.unwrapped.env_id
-
-
 def make_policy(spec: str, env: Any, config: str | Path | None = None) -> Any:
     """Build a baseline from ``"name[:key=value,...]"`` or load a model from a path.
 
@@ -125,7 +126,7 @@ def make_policy(spec: str, env: Any, config: str | Path | None = None) -> Any:
     if spec.startswith("zoo:"):  # an agent shipped with the package
         from soft_snake_gym.training import load_trained, zoo_path
 
-        return load_trained(zoo_path(_env_id(env), spec[4:]), env)
+        return load_trained(zoo_path(_unwrap_one(env).env_id, spec[4:]), env)
     name, params = parse_policy_spec(spec)
     if name not in BASELINES:
         if _looks_like_path(spec):  # a run folder or model zip, with its VecNormalize statistics

@@ -21,7 +21,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from soft_snake_gym.config import ConfigError, from_dict, load_yaml
+from soft_snake_gym.config import from_dict, load_yaml
 
 __all__ = ["BaselinePolicy", "EnvLayout", "PolicyEnvMismatch", "env_layout"]
 
@@ -226,17 +226,3 @@ class BaselinePolicy:
             f"{f.name}={getattr(self.params, f.name)!r}" for f in dataclasses.fields(self.params)
         )
         return f"{type(self).__name__}({args})"
-
-
-def check_params(
-    params: Any, name: str, positive: tuple[str, ...] = (), nonnegative: tuple[str, ...] = ()
-) -> None:
-    """Raise ConfigError naming a field that must be (strictly) positive."""
-    for f in positive:
-        v = getattr(params, f)
-        if v is not None and not v > 0:
-            raise ConfigError(f"{name}.{f} = {v!r} must be > 0")
-    for f in nonnegative:
-        v = getattr(params, f)
-        if v is not None and not v >= 0:
-            raise ConfigError(f"{name}.{f} = {v!r} must be >= 0")
