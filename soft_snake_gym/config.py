@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import inspect
 import re
 import types
 import typing
@@ -144,9 +145,10 @@ def from_dict(cls: type[T], data: Any, where: str | None = None) -> T:
         raise ConfigError(f"{where} must be a mapping of keys to values, got {data!r}")
     hints = typing.get_type_hints(cls)
     valid = [f.name for f in dataclasses.fields(cls) if f.init]
+    retired = set(inspect.signature(cls).parameters) - set(valid)  # InitVars that explain themselves
     kwargs = {}
     for key, value in data.items():
-        if key not in valid:
+        if key not in valid and key not in retired:  # a retired key's own check explains it
             raise ConfigError(_unknown_key_message(where, key, valid))
         kwargs[key] = _coerce(value, hints[key], f"{where}.{key}")
     try:

@@ -8,7 +8,7 @@ fails at construction time instead of as a NaN a thousand steps later.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import InitVar, dataclass, fields
 from typing import Literal
 
 __all__ = ["Rod", "Fluid", "Ground", "Integrator", "SimConfig", "Medium"]
@@ -58,7 +58,12 @@ class Rod:
         E: Young's modulus [Pa], used for both stiffnesses unless overridden.
         E_stretch: stretching modulus [Pa] overriding ``E`` in ``EA`` (None: use ``E``).
         E_bend: bending modulus [Pa] overriding ``E`` in ``EI`` (None: use ``E``).
-        damping: viscous damping ``d`` on curvature rates [N m s] and stretch rates [N s/m].
+        damping_bend: Kelvin-Voigt damping of bending: a generalized force
+            ``-damping_bend * kappa_dot`` at each interior node [N m s] (MODEL.md §3).
+        damping_stretch: Kelvin-Voigt damping of stretching: a force ``-damping_stretch`` times
+            the stretch rate along each edge [N s/m] (MODEL.md §3).
+        damping: removed; passing it raises an error naming ``damping_bend`` and
+            ``damping_stretch``, which replace it.
     """
 
     N: int = 10
@@ -69,9 +74,17 @@ class Rod:
     E: float = 1.875e6
     E_stretch: float | None = None
     E_bend: float | None = None
-    damping: float = 0.0
+    damping_bend: float = 0.0
+    damping_stretch: float = 0.0
+    damping: InitVar[float | None] = None
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, damping: float | None) -> None:
+        if damping is not None:
+            raise ValueError(
+                f"Rod.damping = {damping!r} is no longer a parameter: it was split into "
+                "damping_bend [N m s] (on curvature rates) and damping_stretch [N s/m] (on "
+                "stretch rates); use those instead"
+            )
         _check_int(self, "N", 3, 100_000)
         _check(self, "edge_length", 0.0, None, lo_open=True)
         _check(self, "edge_mass", 0.0, None, lo_open=True)
@@ -82,7 +95,8 @@ class Rod:
             _check(self, "E_stretch", 0.0, None, lo_open=True)
         if self.E_bend is not None:
             _check(self, "E_bend", 0.0, None, lo_open=True)
-        _check(self, "damping", 0.0, None)
+        _check(self, "damping_bend", 0.0, None)
+        _check(self, "damping_stretch", 0.0, None)
 
     @property
     def area(self) -> float:
@@ -158,7 +172,7 @@ class Integrator:
 
     Attributes:
         method: ``"backward_euler"`` (default; Newton on the banded analytic Jacobian) or
-            ``"symplectic_euler"`` (explicit, sub-stepped; needs ``Rod.damping > 0`` under
+            ``"symplectic_euler"`` (explicit, sub-stepped; needs ``Rod.damping_bend > 0`` under
             the curvature PID, see MODEL.md §5a).
         h: step [s]; the inputs are held constant over it.
         substeps: internal steps per ``h``; ``None`` picks 1 for backward Euler and, for the

@@ -422,7 +422,7 @@ def test_seeded_noisy_starts_differ_but_stay_small():
 
 
 def test_randomization_draws_physics_per_episode_and_reports_it():
-    ranges = {"E": [1.0e6, 3.0e6], "damping": [0.0, 0.1], "rho": [900.0, 1100.0],
+    ranges = {"E": [1.0e6, 3.0e6], "damping_bend": [0.0, 0.1], "damping_stretch": [0.0, 5.0], "rho": [900.0, 1100.0],
               "C_D": [1.0, 2.0], "C_A": [1.0, 2.0], "C_f": [0.2, 0.4], "mu_s": [0.5, 0.6], "mu_d": [0.55, 0.9]}
     env = gym.make("SoftEel-v0", randomize=ranges)
     _, info = env.reset(seed=0)

@@ -15,7 +15,7 @@ RNG_SEED = 1234
 def bent_simulator(N: int, medium: str = "none", damping: float = 0.0, seed: int = RNG_SEED, **integ):
     """A simulator in a random bent, slightly stretched, moving state."""
     rng = np.random.default_rng(seed)
-    sim = Simulator(SimConfig(rod=Rod(N=N, damping=damping), medium=medium,
+    sim = Simulator(SimConfig(rod=Rod(N=N, damping_bend=damping, damping_stretch=damping), medium=medium,
                               integrator=Integrator(**integ)))
     lbar = np.full(N - 1, 0.18)
     x = body_from_curvature(rng.normal(0, 0.4, N - 2), lbar * (1 + rng.normal(0, 0.02, N - 1)))
@@ -176,7 +176,7 @@ def test_backward_euler_converges_at_first_order():
 
 def test_uniform_rest_curvature_relaxes_to_a_circular_arc():
     kbar0 = 0.3
-    sim = Simulator(SimConfig(rod=Rod(N=12, damping=2.0)))  # water + damping to settle
+    sim = Simulator(SimConfig(rod=Rod(N=12, damping_bend=2.0, damping_stretch=2.0)))  # water + damping to settle
     sim.reset(kbar=np.full(10, kbar0))  # a straight body with curved rest shape
     sim.reset(x=body_from_curvature(np.zeros(10), sim.lbar), kbar=np.full(10, kbar0))
     for _ in range(1000):

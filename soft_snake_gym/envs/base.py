@@ -50,7 +50,7 @@ class Randomization:
     """Per-episode physics randomization: each field is ``None`` (not randomized) or a range
     ``[low, high]`` from which the value is drawn uniformly at every ``reset``.
 
-    Fields map onto :class:`~soft_snake_gym.params.Rod` (``E``, ``E_bend``, ``damping``),
+    Fields map onto :class:`~soft_snake_gym.params.Rod` (``E``, ``E_bend``, ``damping_bend``, ``damping_stretch``),
     :class:`~soft_snake_gym.params.Fluid` (``rho``, ``C_f``, ``C_D``, ``C_A``) and
     :class:`~soft_snake_gym.params.Ground` (``mu_s``, ``mu_d``; a drawn ``mu_d`` above the drawn
     ``mu_s`` is lowered to it). The draws happen in field order from ``env.np_random``.
@@ -58,7 +58,8 @@ class Randomization:
 
     E: tuple[float, float] | None = None
     E_bend: tuple[float, float] | None = None
-    damping: tuple[float, float] | None = None
+    damping_bend: tuple[float, float] | None = None
+    damping_stretch: tuple[float, float] | None = None
     rho: tuple[float, float] | None = None
     C_f: tuple[float, float] | None = None
     C_D: tuple[float, float] | None = None
@@ -67,7 +68,8 @@ class Randomization:
     mu_d: tuple[float, float] | None = None
 
     _SECTIONS: ClassVar[dict[str, str]] = {
-        "E": "rod", "E_bend": "rod", "damping": "rod", "rho": "fluid", "C_f": "fluid",
+        "E": "rod", "E_bend": "rod", "damping_bend": "rod", "damping_stretch": "rod",
+        "rho": "fluid", "C_f": "fluid",
         "C_D": "fluid", "C_A": "fluid", "mu_s": "ground", "mu_d": "ground",
     }
 

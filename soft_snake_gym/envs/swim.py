@@ -133,7 +133,7 @@ class SwimEnv(SoftRobotEnv):
     |-----------------------|-------------------|----------------|-----------------------------------------------------------------------------|
     | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: water` key is accepted)         |
     | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
-    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9): N, edge length and mass, a, b, E, damping           |
+    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9): N, edge length and mass, a, b, E, damping_bend, damping_stretch |
     | `fluid`               | dict or `Fluid`   | `Fluid()`      | water: rho, C_f, C_D, C_A                                                   |
     | `ground`              | dict or `Ground`  | `Ground()`     | unused in water; kept so one YAML file can describe both settings           |
     | `integrator`          | dict or `Integrator` | `Integrator()` | backward Euler at h = 0.01 s by default (MODEL.md §5a)                   |
@@ -150,7 +150,7 @@ class SwimEnv(SoftRobotEnv):
     | `serpenoid_delta`     | float or None     | `None`         | phase offset (rad) between nodes; `None`: `2 pi/(N-2)` (pi/4 for N = 10)    |
     | `goal_direction`      | float             | `0.0`          | goal direction (rad from +x)                                                |
     | `max_observed_speed`  | float             | `2.0`          | bound of `com_velocity_body` (m/s)                                          |
-    | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping, rho, C_f, C_D, C_A, mu_s, mu_d |
+    | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping_bend, damping_stretch, rho, C_f, C_D, C_A, mu_s, mu_d |
 
     ## Version History
     * v0: initial version, on the PDER simulator of ``soft_snake_gym.physics``.

@@ -26,12 +26,13 @@ from soft_snake_gym.physics.cache import drop_stale_cache
 drop_stale_cache(__file__, [banded.__file__])  # the cached kernels embed banded.py's code
 
 # --- parameter vector ----------------------------------------------------------------------
-P_EA, P_EI, P_DAMP, P_RHO, P_CF, P_CD, P_CA, P_A, P_B = 0, 1, 2, 3, 4, 5, 6, 7, 8
+P_EA, P_EI, P_DBEND, P_RHO, P_CF, P_CD, P_CA, P_A, P_B = 0, 1, 2, 3, 4, 5, 6, 7, 8
 P_MUS, P_MUD, P_VTOL, P_G = 9, 10, 11, 12
 P_H, P_SUBSTEPS, P_TOL, P_MAXIT, P_MEDIUM, P_METHOD, P_MAXSTRAIN, P_CHECKSI = (
     13, 14, 15, 16, 17, 18, 19, 20,
 )
-N_PRM = 21
+P_DSTRETCH = 21
+N_PRM = 22
 
 MEDIUM_NONE, MEDIUM_WATER, MEDIUM_GROUND = 0, 1, 2
 METHOD_BACKWARD_EULER, METHOD_SYMPLECTIC_EULER = 0, 1
@@ -164,7 +165,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
     forces. Returns the power lost to drag ``-sum F_D . v_edge`` [W].
     """
     N = q.size // 2
-    EA, EI, d = prm[P_EA], prm[P_EI], prm[P_DAMP]
+    EA, EI, d, db = prm[P_EA], prm[P_EI], prm[P_DSTRETCH], prm[P_DBEND]
     # stretching (MODEL.md §3): force on x[k+1] is -EA (|e|/lbar - 1) t
     for k in range(N - 1):
         ex = q[2 * k + 2] - q[2 * k]
@@ -195,10 +196,10 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
         dk = kap - kbar[j - 1]
         w = 1.0 + 0.25 * kap * kap
         s = kb * dk * w  # dE/dphi
-        if d > 0.0:
+        if db > 0.0:
             phidot = (g0x * v[2 * j - 2] + g0y * v[2 * j - 1] + g1x * v[2 * j]
                       + g1y * v[2 * j + 1] + g2x * v[2 * j + 2] + g2y * v[2 * j + 3])
-            s += d * w * w * phidot  # -d kappa_dot mapped through d kappa/d x
+            s += db * w * w * phidot  # -d kappa_dot mapped through d kappa/d x
         F[2 * j - 2] -= s * g0x
         F[2 * j - 1] -= s * g0y
         F[2 * j] -= s * g1x
@@ -208,7 +209,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
         if jac:
             # d2E/dphi2 and the Hessians of the edge angles, H = -(t n^T + n t^T)/l^2
             s2 = kb * (w * w + dk * 0.5 * kap * w)
-            alpha = -(cx * s2 + cv * d * w * w)
+            alpha = -(cx * s2 + cv * db * w * w)
             beta = -cx * kb * dk * w
             ia = 1.0 / (la * la)
             ib = 1.0 / (lbn * lbn)

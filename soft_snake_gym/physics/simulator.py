@@ -52,7 +52,8 @@ def pack_params(config: SimConfig, prm: np.ndarray) -> None:
     rod, fl, gr, it = config.rod, config.fluid, config.ground, config.integrator
     prm[K.P_EA] = rod.EA
     prm[K.P_EI] = rod.EI
-    prm[K.P_DAMP] = rod.damping
+    prm[K.P_DBEND] = rod.damping_bend
+    prm[K.P_DSTRETCH] = rod.damping_stretch
     prm[K.P_RHO] = fl.rho
     prm[K.P_CF] = fl.C_f
     prm[K.P_CD] = fl.C_D
