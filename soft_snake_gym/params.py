@@ -131,14 +131,31 @@ class Rod:
 
 @dataclass(frozen=True)
 class Fluid:
-    """Water at rest, Morison-type drag and normal added mass (MODEL.md §4)."""
+    """Water at rest, Morison-type drag and normal added mass (MODEL.md §4).
+
+    Attributes:
+        rho: density [kg/m^3].
+        C_f: tangential (skin friction) drag coefficient [-].
+        C_D: normal drag coefficient [-].
+        C_A: normal added-mass coefficient [-].
+        added_mass: ``"consistent"`` (default): the Lagrangian force of the water's kinetic
+            energy ``T_f``, which exchanges energy with the body without creating any;
+            ``"kelasidi"``: the sources' acceleration term alone, which does net work on
+            rotating edges.
+    """
 
     rho: float = 1000.0
     C_f: float = 0.3
     C_D: float = 1.75
     C_A: float = 1.5
+    added_mass: Literal["consistent", "kelasidi"] = "consistent"
 
     def __post_init__(self) -> None:
+        if self.added_mass not in ("consistent", "kelasidi"):
+            raise ValueError(
+                f"Fluid.added_mass = {self.added_mass!r} is unknown; use 'consistent' "
+                "(energy-conserving, the default) or 'kelasidi' (the sources' form)"
+            )
         _check(self, "rho", 0.0, None)
         _check(self, "C_f", 0.0, None)
         _check(self, "C_D", 0.0, None)

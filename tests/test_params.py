@@ -26,6 +26,7 @@ CONFIGS = Path(__file__).resolve().parents[1] / "configs"
         (lambda: Rod(damping_stretch=float("nan")), "Rod.damping_stretch", "nan"),
         (lambda: Rod(damping=1.0), "damping_bend", "damping_stretch"),
         (lambda: Fluid(rho=-1.0), "Fluid.rho", "-1.0"),
+        (lambda: Fluid(added_mass="munk"), "Fluid.added_mass", "munk"),
         (lambda: Ground(mu_s=0.5, mu_d=0.8), "Ground.mu_d", "0.8"),
         (lambda: Ground(V_tol=0.0), "Ground.V_tol", "0.0"),
         (lambda: Integrator(h=0.0), "Integrator.h", "0.0"),

@@ -20,6 +20,7 @@ __all__ = [
 ]
 
 _MEDIA = {"none": K.MEDIUM_NONE, "water": K.MEDIUM_WATER, "ground": K.MEDIUM_GROUND}
+_ADDED_MASS = {"consistent": K.ADDED_MASS_CONSISTENT, "kelasidi": K.ADDED_MASS_KELASIDI}
 _METHODS = {"backward_euler": K.METHOD_BACKWARD_EULER, "symplectic_euler": K.METHOD_SYMPLECTIC_EULER}
 
 
@@ -58,6 +59,7 @@ def pack_params(config: SimConfig, prm: np.ndarray) -> None:
     prm[K.P_CF] = fl.C_f
     prm[K.P_CD] = fl.C_D
     prm[K.P_CA] = fl.C_A
+    prm[K.P_ADDED_MASS] = _ADDED_MASS[fl.added_mass]
     prm[K.P_A] = rod.a
     prm[K.P_B] = rod.b
     prm[K.P_MUS] = gr.mu_s
