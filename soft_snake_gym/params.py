@@ -164,12 +164,32 @@ class Fluid:
 
 @dataclass(frozen=True)
 class Ground:
-    """Stick-slip (Karnopp) Coulomb friction on a flat floor (MODEL.md §5)."""
+    """Stick-slip Coulomb friction on a flat floor, decided at the end of each step (MODEL.md §5).
+
+    A node ends a step at rest where the force needed to hold it is within ``mu_s F_N``
+    (``F_N = m_i g``) and otherwise slides with kinetic friction against its end velocity.
+
+    Attributes:
+        mu_s: static friction coefficient [-].
+        mu_d: kinetic friction coefficient [-], at most ``mu_s``.
+        V_tol: a node that ends a step slower than this sticks [m/s].
+        g: gravity [m/s^2].
+        mu_forward: anisotropic option: kinetic coefficient for sliding toward the head along
+            the body's local tangent [-]; ``None`` (default): ``mu_d``.
+        mu_backward: the same for sliding toward the tail [-]; ``None``: ``mu_d``.
+        mu_lateral: the same across the body [-]; ``None``: ``mu_d``. The three set, friction
+            is ``-F_N (mu_t v_t t + mu_lateral v_n n) / |v|``, with ``mu_t`` the forward or
+            backward coefficient by the sign of ``v_t`` (as setae and snake scales give).
+            Each must be at most ``mu_s``; the static threshold stays ``mu_s``.
+    """
 
     mu_s: float = 1.15
     mu_d: float = 0.8
     V_tol: float = 1e-3
     g: float = 9.81
+    mu_forward: float | None = None
+    mu_backward: float | None = None
+    mu_lateral: float | None = None
 
     def __post_init__(self) -> None:
         _check(self, "mu_s", 0.0, None)
@@ -181,6 +201,19 @@ class Ground:
                 f"Ground.mu_d = {self.mu_d!r} exceeds Ground.mu_s = {self.mu_s!r}: kinetic "
                 "friction must not exceed static friction (allowed: 0 <= mu_d <= mu_s)"
             )
+        for name in ("mu_forward", "mu_backward", "mu_lateral"):
+            if getattr(self, name) is not None:
+                _check(self, name, 0.0, self.mu_s)
+
+    @property
+    def anisotropic(self) -> bool:
+        """True if any directional coefficient differs from ``mu_d``."""
+        return any(c is not None and c != self.mu_d for c in self.kinetic)
+
+    @property
+    def kinetic(self) -> tuple[float, float, float]:
+        """(forward, backward, lateral) kinetic coefficients, ``mu_d`` where not set."""
+        return tuple(self.mu_d if c is None else c for c in (self.mu_forward, self.mu_backward, self.mu_lateral))
 
 
 @dataclass(frozen=True)

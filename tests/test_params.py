@@ -29,6 +29,8 @@ CONFIGS = Path(__file__).resolve().parents[1] / "configs"
         (lambda: Fluid(added_mass="munk"), "Fluid.added_mass", "munk"),
         (lambda: Ground(mu_s=0.5, mu_d=0.8), "Ground.mu_d", "0.8"),
         (lambda: Ground(V_tol=0.0), "Ground.V_tol", "0.0"),
+        (lambda: Ground(mu_forward=2.0), "Ground.mu_forward", "2.0"),
+        (lambda: Ground(mu_lateral=-0.1), "Ground.mu_lateral", "-0.1"),
         (lambda: Integrator(h=0.0), "Integrator.h", "0.0"),
         (lambda: Integrator(method="rk4"), "Integrator.method", "rk4"),
         (lambda: Integrator(substeps=0), "Integrator.substeps", "0"),

@@ -33,7 +33,9 @@ P_H, P_SUBSTEPS, P_TOL, P_MAXIT, P_MEDIUM, P_METHOD, P_MAXSTRAIN, P_CHECKSI = (
 )
 P_DSTRETCH = 21
 P_ADDED_MASS = 22  # ADDED_MASS_* code
-N_PRM = 23
+
+P_ANISO, P_MU_FWD, P_MU_BWD, P_MU_LAT = 23, 24, 25, 26  # anisotropic kinetic friction
+N_PRM = 27
 
 ADDED_MASS_CONSISTENT, ADDED_MASS_KELASIDI = 0, 1
 
@@ -41,11 +43,12 @@ MEDIUM_NONE, MEDIUM_WATER, MEDIUM_GROUND = 0, 1, 2
 METHOD_BACKWARD_EULER, METHOD_SYMPLECTIC_EULER = 0, 1
 
 # --- scratch rows ----------------------------------------------------------------------------
-B_R, B_DV, B_F, B_Q0, B_V0, B_VACC, B_M, B_FEXT, B_KEYS, B_FBRK, B_A = range(11)
-N_BUF = 11
-I_PIV, I_ORDER, I_FRICTION = 0, 1, 2
-N_IBUF = 3
-SLIDING, STUCK, BREAKAWAY = 0, 1, 2
+B_R, B_DV, B_F, B_Q0, B_V0, B_VACC, B_M, B_FEXT, B_KEYS, B_A = range(10)
+N_BUF = 10
+I_PIV, I_ORDER, I_FRICTION, I_SWITCHES = 0, 1, 2, 3
+N_IBUF = 4
+SLIDING, STUCK = 0, 1
+MAX_SWITCHES = 2  # contact changes per node and step: bounds the active-set passes
 
 # --- diagnostics -----------------------------------------------------------------------------
 (O_STATUS, O_NITER, O_RESIDUAL, O_P_FLUID, O_P_FRICTION, O_P_ACT, O_E_FLUID, O_E_FRICTION,
@@ -407,42 +410,54 @@ def check_state(q, v, lbar, prm, buf, ibuf):
 
 
 @njit(cache=True, error_model="numpy")
-def _classify_friction(q, v, kbar, lbar, prm, buf, J, ibuf):
-    """Karnopp classification at the start of a step (MODEL.md §5): a slow node whose other
-    forces stay within ``mu_s F_N`` sticks; a slow node pushed harder breaks away with a
-    kinetic friction opposing the push; a moving node slides."""
-    n = q.size
-    F = buf[B_F]
-    fext = buf[B_FEXT]
-    for i in range(n):
-        F[i] = fext[i]
-    assemble(q, v, kbar, lbar, prm, F, J, 0.0, 0.0, False, False)
-    m = buf[B_M]
-    fbrk = buf[B_FBRK]
-    state = ibuf[I_FRICTION]
-    for i in range(n // 2):
-        fn = m[2 * i] * prm[P_G]
-        fbrk[2 * i] = 0.0
-        fbrk[2 * i + 1] = 0.0
-        if math.hypot(v[2 * i], v[2 * i + 1]) >= prm[P_VTOL]:
-            state[i] = SLIDING
-            continue
-        fo = math.hypot(F[2 * i], F[2 * i + 1])
-        if fo <= prm[P_MUS] * fn:
-            state[i] = STUCK
-            v[2 * i] = 0.0
-            v[2 * i + 1] = 0.0
-        else:
-            _break_away(i, fn, fo, F, fbrk, state, prm)
+def node_tangent(q, i):
+    """Unit tangent of the body at node i: along the sum of its edges' unit tangents."""
+    N = q.size // 2
+    tx, ty = 0.0, 0.0
+    for k in (i - 1, i):
+        if 0 <= k < N - 1:
+            ex, ey = q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1]
+            l = math.sqrt(ex * ex + ey * ey)
+            tx += ex / l
+            ty += ey / l
+    l = math.sqrt(tx * tx + ty * ty)
+    return tx / l, ty / l
 
 
 @njit(cache=True, error_model="numpy")
-def _break_away(i, fn, fo, F, fbrk, state, prm):
-    """Node i breaks away: kinetic friction ``mu_d F_N`` against its other forces ``F``
-    (magnitude ``fo``), held constant over the step."""
-    state[i] = BREAKAWAY
-    fbrk[2 * i] = -prm[P_MUD] * fn * F[2 * i] / fo
-    fbrk[2 * i + 1] = -prm[P_MUD] * fn * F[2 * i + 1] / fo
+def kinetic_friction(q, v, i, fn, eps2, prm):
+    """Kinetic friction on sliding node i with normal load ``fn`` [N] (MODEL.md §5) and its
+    derivative by the node's velocity (the tangent's dependence on q is left out).
+
+    Isotropic: ``-mu_d fn v / s``, ``s = sqrt(|v|^2 + eps2)`` (a smoothing far below the
+    sticking speed). Anisotropic: ``-fn (mu_t v_t t + mu_lateral v_n n) / s``, with ``mu_t`` the
+    forward or backward coefficient by the sign of ``v_t``.
+
+    Returns:
+        (fx, fy, d fx/d vx, d fx/d vy, d fy/d vx, d fy/d vy).
+    """
+    vx, vy = v[2 * i], v[2 * i + 1]
+    s = math.sqrt(vx * vx + vy * vy + eps2)
+    if prm[P_ANISO] == 0.0:
+        c = prm[P_MUD] * fn
+        s3 = s * s * s
+        return (-c * vx / s, -c * vy / s, -c * (1.0 / s - vx * vx / s3), c * vx * vy / s3,
+                c * vx * vy / s3, -c * (1.0 / s - vy * vy / s3))
+    tx, ty = node_tangent(q, i)
+    nx, ny = -ty, tx
+    vt = vx * tx + vy * ty
+    vn = vx * nx + vy * ny
+    mt = prm[P_MU_FWD] if vt > 0.0 else prm[P_MU_BWD]
+    mn = prm[P_MU_LAT]
+    gx = fn * (mt * vt * tx + mn * vn * nx)  # the friction force is -g / s
+    gy = fn * (mt * vt * ty + mn * vn * ny)
+    s3 = s * s * s
+    # d(-g/s)/dv = -(fn (mt t t^T + mn n n^T)) / s + g v^T / s^3
+    a00 = fn * (mt * tx * tx + mn * nx * nx)
+    a01 = fn * (mt * tx * ty + mn * nx * ny)
+    a11 = fn * (mt * ty * ty + mn * ny * ny)
+    return (-gx / s, -gy / s, -a00 / s + gx * vx / s3, -a01 / s + gx * vy / s3,
+            -a01 / s + gy * vx / s3, -a11 / s + gy * vy / s3)
 
 
 @njit(cache=True, error_model="numpy")
@@ -472,8 +487,7 @@ def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
     p_fric = 0.0
     if medium == MEDIUM_GROUND:
         state = ibuf[I_FRICTION]
-        fbrk = buf[B_FBRK]
-        eps2 = (1e-2 * prm[P_VTOL]) ** 2
+        eps2 = (0.1 * prm[P_VTOL]) ** 2  # nodes slower than V_tol stick, so this only smooths
         for i in range(n // 2):
             r0, r1 = 2 * i, 2 * i + 1
             if state[i] == STUCK:
@@ -484,21 +498,13 @@ def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
                     J[r1, :] = 0.0
                     J[r0, KL] = 1.0
                     J[r1, KL] = 1.0
-            elif state[i] == BREAKAWAY:
-                R[r0] -= dt * fbrk[r0]
-                R[r1] -= dt * fbrk[r1]
-                p_fric -= fbrk[r0] * v[r0] + fbrk[r1] * v[r1]
             else:
-                c = prm[P_MUD] * m[r0] * prm[P_G]
-                vx, vy = v[r0], v[r1]
-                s = math.sqrt(vx * vx + vy * vy + eps2)
-                R[r0] += dt * c * vx / s
-                R[r1] += dt * c * vy / s
-                p_fric += c * (vx * vx + vy * vy) / s
+                fx, fy, d00, d01, d10, d11 = kinetic_friction(q, v, i, m[r0] * prm[P_G], eps2, prm)
+                R[r0] -= dt * fx
+                R[r1] -= dt * fy
+                p_fric -= fx * v[r0] + fy * v[r1]
                 if jac:
-                    s3 = s * s * s
-                    _add_block(J, i, i, dt * c * (1.0 / s - vx * vx / s3), -dt * c * vx * vy / s3,
-                               -dt * c * vx * vy / s3, dt * c * (1.0 / s - vy * vy / s3))
+                    _add_block(J, i, i, -dt * d00, -dt * d01, -dt * d10, -dt * d11)
     norm2 = 0.0
     rmax = 0.0
     for i in range(n):
@@ -508,20 +514,44 @@ def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
 
 
 @njit(cache=True, error_model="numpy")
-def _release_overloaded(buf, ibuf, prm, n):
-    """Stuck nodes whose other forces (``buf[B_F]``, at the current iterate) exceed
-    ``mu_s F_N`` break away with kinetic friction against those forces; True if any did."""
-    F, m, fbrk = buf[B_F], buf[B_M], buf[B_FBRK]
-    state = ibuf[I_FRICTION]
+def _update_contacts(v, buf, ibuf, prm, dt, n):
+    """Make stick-slip consistent with the end of a converged step (MODEL.md §5); True if a
+    node changed and the step must be solved again.
+
+    A sliding node that ends slower than ``V_tol`` sticks. Otherwise the stuck node whose
+    holding force ``f = -m v0/dt - F`` (``F``: every other force, at the end of the step) most
+    exceeds ``mu_s F_N`` is released to slide, with a first guess along its push: one at a
+    time, because releasing one node unloads the others. Each node changes at most
+    ``MAX_SWITCHES`` times per step, so the passes end.
+    """
+    F, m, v0 = buf[B_F], buf[B_M], buf[B_V0]
+    state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
+    stuck_any = False
+    for i in range(n // 2):
+        if (state[i] == SLIDING and switches[i] < MAX_SWITCHES
+                and math.hypot(v[2 * i], v[2 * i + 1]) < prm[P_VTOL]):
+            state[i] = STUCK
+            switches[i] += 1
+            v[2 * i] = 0.0
+            v[2 * i + 1] = 0.0
+            stuck_any = True
+    if stuck_any:
+        return True
     released = False
     for i in range(n // 2):
-        if state[i] != STUCK:
+        if state[i] != STUCK or switches[i] >= MAX_SWITCHES:
             continue
-        fn = m[2 * i] * prm[P_G]
-        fo = math.hypot(F[2 * i], F[2 * i + 1])
-        if fo > prm[P_MUS] * fn:
-            _break_away(i, fn, fo, F, fbrk, state, prm)
-            released = True
+        fx = -m[2 * i] * v0[2 * i] / dt - F[2 * i]
+        fy = -m[2 * i] * v0[2 * i + 1] / dt - F[2 * i + 1]
+        f = math.hypot(fx, fy)
+        if f <= prm[P_MUS] * m[2 * i] * prm[P_G]:
+            continue
+        state[i] = SLIDING
+        switches[i] += 1
+        released = True
+        # first guess: just above the sticking speed, along the push (Newton finds the rest)
+        v[2 * i] = -2.0 * prm[P_VTOL] * fx / f
+        v[2 * i + 1] = -2.0 * prm[P_VTOL] * fy / f
     return released
 
 
@@ -536,10 +566,20 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     tol = prm[P_TOL]
     maxit = int(prm[P_MAXIT])
     if medium == MEDIUM_GROUND:
-        _classify_friction(q, v, kbar, lbar, prm, buf, J, ibuf)
+        # first guess of the contacts from the start of the step: slow nodes stick, the rest
+        # slide; _update_contacts then makes them consistent with the end of the step
+        state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
         for i in range(n):
             q0[i] = q[i]
             v0[i] = v[i]
+        for i in range(n // 2):
+            switches[i] = 0
+            if math.hypot(v[2 * i], v[2 * i + 1]) < prm[P_VTOL]:
+                state[i] = STUCK
+                v[2 * i] = 0.0
+                v[2 * i + 1] = 0.0
+            else:
+                state[i] = SLIDING
     else:
         # predictor: extrapolate the velocity from the last step (v0 still holds its start;
         # set_state makes it the current velocity, so a fresh state starts with v)
@@ -550,18 +590,20 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
             v[i] = 2.0 * v[i] - v_prev
     norm2, rmax, p_fluid, p_fric = _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, True)
     it = 0
+    pass_it = 0
     while True:
         if rmax <= tol:
-            # stick-slip consistent at the end of the step: a node held stuck against more
-            # than static friction breaks away, and the step is solved again (each node goes
-            # sliding -> stuck -> breakaway at most once, so this ends)
-            if medium != MEDIUM_GROUND or not _release_overloaded(buf, ibuf, prm, n):
+            # stick-slip decided by the end of the step (MODEL.md §5): if a contact changes,
+            # the step is solved again from the current iterate
+            if medium != MEDIUM_GROUND or not _update_contacts(v, buf, ibuf, prm, dt, n):
                 break
             norm2, rmax, p_fluid, p_fric = _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, True)
+            pass_it = 0  # the iteration cap holds per contact pass
             continue
-        if it == maxit or not math.isfinite(norm2):
+        if pass_it == maxit or not math.isfinite(norm2):
             return NOT_CONVERGED, it, rmax, p_fluid, p_fric
         it += 1
+        pass_it += 1
         for i in range(n):
             vacc[i] = v[i]
             dv[i] = -R[i]
@@ -577,21 +619,7 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
                 break
             step *= 0.5
         norm2, rmax, p_fluid, p_fric = trial
-        if medium == MEDIUM_GROUND:
-            # Coulomb friction stops a sliding node within the step rather than reversing it
-            state = ibuf[I_FRICTION]
-            changed = False
-            for i in range(n // 2):
-                if state[i] == SLIDING and v[2 * i] * v0[2 * i] + v[2 * i + 1] * v0[2 * i + 1] <= 0.0:
-                    state[i] = STUCK
-                    v[2 * i] = 0.0
-                    v[2 * i + 1] = 0.0
-                    changed = True
-            if changed:
-                norm2, rmax, p_fluid, p_fric = _be_residual(
-                    q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, False
-                )
-        if rmax > tol and it < maxit and math.isfinite(norm2):
+        if rmax > tol and pass_it < maxit and math.isfinite(norm2):
             # another iteration follows: the Jacobian at the accepted velocity (the residual
             # is recomputed bit for bit; most steps converge here and skip this assembly)
             _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, True)
@@ -601,8 +629,10 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
 @njit(cache=True, error_model="numpy")
 def _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     """One explicit semi-implicit (symplectic) Euler step: kick with F(q, v), then drift.
-    On the ground, explicit Karnopp friction; a sliding node is stopped, not reversed.
-    Returns (fluid power, friction power) at the start of the step."""
+    On the ground, friction is decided by the end of the kick (MODEL.md §5): a node whose
+    frictionless end velocity ``w`` could be stopped within ``mu_s F_N`` sticks, any other
+    slides with ``mu_d F_N`` against ``w`` (the lumped mass matrix is diagonal on the ground,
+    so each node is decided on its own). Returns (fluid power, friction power)."""
     n = q.size
     F, a, m, fext = buf[B_F], buf[B_A], buf[B_M], buf[B_FEXT]
     for i in range(n):
@@ -610,34 +640,27 @@ def _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     p_fluid = assemble(q, v, kbar, lbar, prm, F, J, 0.0, 0.0, False, medium == MEDIUM_WATER)
     solve_mass(q, prm, m, F, a, J, ibuf[I_PIV], medium == MEDIUM_WATER)
     p_fric = 0.0
+    for i in range(n):
+        v[i] += dt * a[i]
     if medium == MEDIUM_GROUND:
         state = ibuf[I_FRICTION]
         for i in range(n // 2):
             r0, r1 = 2 * i, 2 * i + 1
-            fn = m[r0] * prm[P_G]
-            speed = math.hypot(v[r0], v[r1])
-            fo = math.hypot(F[r0], F[r1])
-            if speed < prm[P_VTOL]:
-                if fo <= prm[P_MUS] * fn:
-                    state[i] = STUCK
-                    v[r0] = 0.0
-                    v[r1] = 0.0
-                    a[r0] = 0.0
-                    a[r1] = 0.0
-                    continue
-                state[i] = BREAKAWAY
-                fx, fy = -prm[P_MUD] * fn * F[r0] / fo, -prm[P_MUD] * fn * F[r1] / fo
+            w = math.hypot(v[r0], v[r1])
+            stop = dt * prm[P_G]  # the speed a friction coefficient of 1 removes in dt
+            if w <= prm[P_MUS] * stop:
+                state[i] = STUCK
+                v[r0] = 0.0
+                v[r1] = 0.0
             else:
+                # kinetic friction along the frictionless end velocity, explicit (a sub-step
+                # is far shorter than the time friction needs to stop the node)
                 state[i] = SLIDING
-                fx, fy = -prm[P_MUD] * fn * v[r0] / speed, -prm[P_MUD] * fn * v[r1] / speed
-            p_fric -= fx * v[r0] + fy * v[r1]
-            a[r0] += fx / m[r0]
-            a[r1] += fy / m[r1]
-            if state[i] == SLIDING and (v[r0] + dt * a[r0]) * v[r0] + (v[r1] + dt * a[r1]) * v[r1] < 0.0:
-                a[r0] = -v[r0] / dt
-                a[r1] = -v[r1] / dt
+                fx, fy = kinetic_friction(q, v, i, m[r0] * prm[P_G], 0.0, prm)[:2]
+                v[r0] += dt * fx / m[r0]
+                v[r1] += dt * fy / m[r0]
+                p_fric -= fx * v[r0] + fy * v[r1]
     for i in range(n):
-        v[i] += dt * a[i]
         q[i] += dt * v[i]
     return p_fluid, p_fric
 

@@ -66,6 +66,8 @@ def pack_params(config: SimConfig, prm: np.ndarray) -> None:
     prm[K.P_MUD] = gr.mu_d
     prm[K.P_VTOL] = gr.V_tol
     prm[K.P_G] = gr.g
+    prm[K.P_ANISO] = float(gr.anisotropic)
+    prm[K.P_MU_FWD], prm[K.P_MU_BWD], prm[K.P_MU_LAT] = gr.kinetic
     prm[K.P_H] = it.h
     prm[K.P_SUBSTEPS] = auto_substeps(config)
     prm[K.P_TOL] = it.newton_tol
