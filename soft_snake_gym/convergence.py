@@ -189,12 +189,22 @@ class ConvergenceResult:
             return v if math.isfinite(v) else None
 
         return {
-            "env_id": self.env_id, "policy": self.policy, "medium": self.medium,
-            "factors": self.factors, "substeps": self.substeps, "h": self.h,
-            "failures": self.failures, "rtol": self.rtol, "ok": self.ok,
+            "env_id": self.env_id,
+            "policy": self.policy,
+            "medium": self.medium,
+            "factors": self.factors,
+            "substeps": self.substeps,
+            "h": self.h,
+            "failures": self.failures,
+            "rtol": self.rtol,
+            "ok": self.ok,
             "metrics": {
-                m: {"values": [clean(v) for v in vals], "atol": self.atol[m],
-                    "tolerance": clean(self.tolerance(m)), "passed": self.passed(m)}
+                m: {
+                    "values": [clean(v) for v in vals],
+                    "atol": self.atol[m],
+                    "tolerance": clean(self.tolerance(m)),
+                    "passed": self.passed(m),
+                }
                 for m, vals in self.values.items()
             },
         }
@@ -265,8 +275,15 @@ def convergence(
         substeps.append(k * f)
         steps.append(base_integrator.h / (k * f))
     return ConvergenceResult(
-        env_id=env_id, policy=policy, medium=medium, factors=factors, substeps=substeps, h=steps,
-        values=values, failures=failures, rtol=RELATIVE_TOLERANCE[medium],
+        env_id=env_id,
+        policy=policy,
+        medium=medium,
+        factors=factors,
+        substeps=substeps,
+        h=steps,
+        values=values,
+        failures=failures,
+        rtol=RELATIVE_TOLERANCE[medium],
         atol={m: ABSOLUTE_TOLERANCE[m] for m in metrics},
     )
 
@@ -279,13 +296,15 @@ def format_convergence(result: ConvergenceResult) -> str:
     labels = {key: (label, unit) for key, label, unit in COLUMNS}
     labels["mean_fluid_power"] = ("fluid power", "W")
     r = result
-    head = [f"h/{f} ({s} sub)" for f, s in zip(r.factors, r.substeps, strict=True)]
+    head = [f"{s} substep{'s' if s > 1 else ''}" for s in r.substeps]
     width = max(len(labels[m][0]) for m in r.values)
     col = max(12, *(len(h) for h in head))
     lines = [
-        f"{r.env_id}  policy={r.policy}  {r.medium}: tolerance {100 * r.rtol:g} % of the finest run "
-        f"(h = {r.h[-1]:.3g} s), or the absolute tolerance near zero",
-        f"{'metric':<{width}}  {'unit':<4}  " + "  ".join(f"{h:>{col}}" for h in head)
+        f"{r.env_id}  policy={r.policy}: one episode at integration steps "
+        f"{', '.join(f'{h:.3g}' for h in r.h)} s; tolerance {100 * r.rtol:g} % ({r.medium}) of the "
+        "finest run, or the absolute one near zero",
+        f"{'metric':<{width}}  {'unit':<4}  "
+        + "  ".join(f"{h:>{col}}" for h in head)
         + f"  {'max rel diff':>12}  {'tolerance':>10}  result",
     ]
     lines.append("-" * len(lines[-1]))
@@ -299,13 +318,92 @@ def format_convergence(result: ConvergenceResult) -> str:
         cells = "  ".join(f"{v:>{col}.4g}" for v in vals)
         rel = max(r.deviations(m)) / abs(ref) if ref != 0 else math.inf
         lines.append(
-            f"{label:<{width}}  {unit:<4}  {cells}  {100 * rel:>11.1f}%  {r.tolerance(m):>10.3g}  "
+            f"{label:<{width}}  {unit:<4}  {cells}  {100 * rel:>11.2f}%  {r.tolerance(m):>10.3g}  "
             f"{'PASS' if passed else 'FAIL'}"
         )
         ratios = "  ".join(f"{(v / ref if ref != 0 else math.nan):>{col}.3f}" for v in vals)
         lines.append(f"{'  ratio to finest':<{width}}  {'':<4}  {ratios}")
-    for f, why in zip(r.factors, r.failures, strict=True):
+    for s, why in zip(r.substeps, r.failures, strict=True):
         if why:
-            lines.append(f"h/{f}: the episode failed ({why})")
+            lines.append(f"{s} substeps: the episode failed ({why})")
     lines.append("converged: all metrics within tolerance" if r.ok else "NOT converged")
     return "\n".join(lines)
+
+
+# --- soft-snake convergence ---------------------------------------------------------------------
+def _arguments(p) -> None:
+    p.add_argument("env_id", help="environment id, e.g. SoftEel-v0 or SoftWorm-v0")
+    p.add_argument(
+        "--policy",
+        required=True,
+        help="what 'evaluate --policy' takes (pid, 'inching:wave=pulse,duty=0.6', zoo:ppo, a run "
+        "folder or model zip), or 'random' / 'random:scale=0.5' for a fixed seeded "
+        "random-action sequence",
+    )
+    p.add_argument(
+        "--factors",
+        type=int,
+        nargs="+",
+        default=list(DEFAULT_FACTORS),
+        metavar="F",
+        help="divide the integration step by each (integrator.substeps = k F, the control "
+        "step unchanged); the largest is the reference (default 1 4 16)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the episode and of 'random'; the same at every factor (default 0)",
+    )
+    p.add_argument(
+        "--transient",
+        type=float,
+        default=2.0,
+        help="start-up time left out of speed and error [s] (default 2)",
+    )
+    p.add_argument("--max-steps", type=int, help="episode length in control steps (default: the id's)")
+    p.add_argument("--env-config", metavar="YAML", help="YAML file of env keywords")
+    p.add_argument(
+        "--env-kwarg",
+        action="append",
+        metavar="KEY=VALUE",
+        help="env keyword, repeatable; dotted keys reach sections (rod.damping_bend=1)",
+    )
+    p.add_argument("--json", metavar="PATH", help="also write the table as JSON")
+
+
+def _run(args) -> int:
+    import json
+    from pathlib import Path
+
+    from soft_snake_gym.cli import CLIError, _parse_env_kwargs
+
+    env_kwargs = _parse_env_kwargs(args.env_kwarg)
+    if args.env_config:
+        env_kwargs["config"] = args.env_config
+    if args.max_steps is not None:
+        if args.max_steps < 1:
+            raise CLIError(f"--max-steps {args.max_steps} must be at least 1")
+        env_kwargs["max_episode_steps"] = args.max_steps
+    result = convergence(args.env_id, args.policy, env_kwargs, args.factors, args.seed, args.transient)
+    print(format_convergence(result))
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(result.to_dict(), indent=2))
+        print(f"wrote {path}")
+    return 0 if result.ok else 1
+
+
+def _register() -> None:
+    from soft_snake_gym.cli import subcommand
+
+    subcommand(
+        "convergence",
+        "check that a policy's episode metrics do not change when the "
+        "integration step shrinks (exit code 1 if they do)",
+        _arguments,
+    )(_run)
+
+
+_register()

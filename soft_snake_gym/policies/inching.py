@@ -28,7 +28,7 @@ from soft_snake_gym.policies.base import BaselinePolicy
 
 __all__ = ["InchingWave", "InchingPID", "InchingParams", "InchingPIDParams", "PULSE_DUTY"]
 
-PULSE_DUTY = 0.5
+PULSE_DUTY = 0.6
 """``duty`` of ``wave="pulse"`` when none is given."""
 
 
