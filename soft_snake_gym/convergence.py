@@ -121,9 +121,9 @@ def make_convergence_policy(spec: str, env: Any, seed: int) -> Any:
     from soft_snake_gym.config import ConfigError
     from soft_snake_gym.policies import make_policy, parse_policy_spec
 
-    name, params = parse_policy_spec(spec)
-    if name != "random":
+    if spec.partition(":")[0].strip() != "random":
         return make_policy(spec, env)
+    _, params = parse_policy_spec(spec)
     unknown = sorted(set(params) - {"scale"})
     if unknown:
         raise ConfigError(f"unknown key {unknown[0]!r} in random policy; valid keys: scale")
