@@ -167,7 +167,8 @@ def _load_subcommands() -> None:
     import importlib
 
     for module in ("soft_snake_gym.sweep", "soft_snake_gym.figures", "soft_snake_gym.reproduce",
-                   "soft_snake_gym.training", "soft_snake_gym.compare", "soft_snake_gym.benchmark"):
+                   "soft_snake_gym.training", "soft_snake_gym.compare", "soft_snake_gym.benchmark",
+                   "soft_snake_gym.convergence"):
         try:
             importlib.import_module(module)
         except ModuleNotFoundError as err:

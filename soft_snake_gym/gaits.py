@@ -1,4 +1,5 @@
-"""Traveling-wave gaits (MODEL.md §6): the serpenoid for swimming, the length wave for inching.
+"""Traveling-wave gaits (MODEL.md §6): the serpenoid for swimming, the length waves (sinusoidal
+and peristaltic pulse) for inching.
 
 All functions are plain numpy on arrays, so policies and tests share them.
 """
@@ -7,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["serpenoid_phase", "serpenoid", "length_wave", "max_serpenoid_amplitude"]
+__all__ = ["serpenoid_phase", "serpenoid", "length_wave", "pulse_wave", "max_serpenoid_amplitude"]
 
 
 def serpenoid_phase(t: float, n_interior: int, omega: float, delta: float, psi0: float = 0.0) -> np.ndarray:
@@ -82,3 +83,48 @@ def length_wave(t: float, n_edges: int, l0: float, eps: float, omega: float, del
         raise ValueError(f"direction = {direction!r} must be +1 (tail to head) or -1 (head to tail)")
     arg = omega * t - direction * delta_l * np.arange(n_edges)
     return l0 * (1.0 - 0.5 * eps * (1.0 + np.sin(arg))), -0.5 * l0 * eps * omega * np.cos(arg)
+
+
+def pulse_wave(t: float, n_edges: int, l0: float, eps: float, omega: float, delta_l: float,
+               duty: float, direction: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Peristaltic pulse of the rest lengths (MODEL.md §6): a raised-cosine compression pulse
+    that occupies a fraction ``duty`` of each period, the rest of the time at ``l0``.
+
+    With the phase ``theta_k = (omega t - direction delta_l k) mod 2 pi`` and
+    ``w = 2 pi duty``::
+
+        c_k = (1 - cos(theta_k / duty)) / 2   if theta_k < w, else 0
+        lbar_des,k = l0 (1 - eps c_k)
+        lbar_dot_des,k = -l0 eps omega sin(theta_k / duty) / (2 duty)   if theta_k < w, else 0
+
+    ``c`` rises from 0 to full compression ``eps`` at the middle of the pulse and back, with a
+    zero slope at both ends, so ``lbar_dot_des`` is continuous and bounded by
+    ``0.5 l0 eps omega / duty`` (1/duty times the sinusoidal wave's peak rate). With
+    ``delta_l = 2 pi / n_edges`` (one period along the body) about ``duty * n_edges`` edges
+    are in the pulse at any time; they travel tail to head for ``direction = +1``. ``duty = 1``
+    is the sinusoidal :func:`length_wave`, a quarter period later.
+
+    Args:
+        t: time [s].
+        n_edges: number of edges N - 1.
+        l0: uncompressed edge length [m].
+        eps: compression at the middle of the pulse, a fraction of ``l0``.
+        omega: temporal frequency [rad/s].
+        delta_l: phase offset between neighbouring edges [rad].
+        duty: fraction of the period (and, at one wave per body, of the edges) in the pulse,
+            in (0, 1].
+        direction: +1 (tail to head) or -1 (head to tail).
+
+    Returns:
+        (lbar_des, lbar_dot_des), (n_edges,) each [m, m/s].
+    """
+    if direction not in (1, -1):
+        raise ValueError(f"direction = {direction!r} must be +1 (tail to head) or -1 (head to tail)")
+    if not 0.0 < duty <= 1.0:
+        raise ValueError(f"duty = {duty!r} must be in (0, 1]: the fraction of the edges in the pulse")
+    theta = np.mod(omega * t - direction * delta_l * np.arange(n_edges), 2.0 * np.pi)
+    inside = theta < 2.0 * np.pi * duty
+    arg = theta / duty
+    c = np.where(inside, 0.5 * (1.0 - np.cos(arg)), 0.0)
+    c_dot = np.where(inside, 0.5 * omega * np.sin(arg) / duty, 0.0)
+    return l0 * (1.0 - eps * c), -l0 * eps * c_dot

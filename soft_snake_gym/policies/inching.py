@@ -1,6 +1,9 @@
 """Inching on land (MODEL.md §6-§7): a compression wave of the rest lengths.
 
-``lbar_des,k(t) = l0 (1 - eps (1 + sin(omega t - direction delta_l k)) / 2)``.
+``wave="sine"`` (default): ``lbar_des,k(t) = l0 (1 - eps (1 + sin(omega t - direction delta_l
+k)) / 2)``, every edge changing at once. ``wave="pulse"``: the peristaltic pulse of
+:func:`soft_snake_gym.gaits.pulse_wave`, a raised-cosine compression of depth ``eps`` over a
+fraction ``duty`` of the edges, the others at ``l0`` (anchored).
 
 Measured direction (thesis worm, mu_s = 1.15, mu_d = 0.8, 10 s, open loop, eps = 0.3,
 omega = 2 pi): with ``direction = +1`` (the wave travels from tail to head) and
@@ -14,14 +17,19 @@ the defaults.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
-from soft_snake_gym.gaits import length_wave
+from soft_snake_gym.gaits import length_wave, pulse_wave
 from soft_snake_gym.policies.base import BaselinePolicy
 
-__all__ = ["InchingWave", "InchingPID", "InchingParams", "InchingPIDParams"]
+__all__ = ["InchingWave", "InchingPID", "InchingParams", "InchingPIDParams", "PULSE_DUTY"]
+
+PULSE_DUTY = 0.6
+"""``duty`` of ``wave="pulse"`` when none is given."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +49,11 @@ class InchingParams:
             env's default) would otherwise leave in the rest lengths for the whole episode.
             The closed loop (:class:`InchingPID`) does not use it: its feedback on the
             measured length removes that offset already.
+        wave: ``"sine"`` (the sinusoidal wave, default) or ``"pulse"`` (the peristaltic pulse).
+        duty: fraction of the edges in the pulse, in (0, 1]; only with ``wave="pulse"``
+            (None: :data:`PULSE_DUTY`). The pulse's peak rate is ``0.5 l0 eps omega / duty``
+            (0.17 m/s / duty at the defaults); above the env's ``max_length_rate`` (0.3 m/s)
+            the env clips it, and the policy warns.
     """
 
     eps: float = 0.3
@@ -49,8 +62,19 @@ class InchingParams:
     direction: int = 1
     l0: float | None = None
     rest_gain: float = 10.0
+    wave: Literal["sine", "pulse"] = "sine"
+    duty: float | None = None
 
     def __post_init__(self) -> None:
+        if self.wave not in ("sine", "pulse"):
+            raise ValueError(f"wave = {self.wave!r} is unknown; use 'sine' or 'pulse'")
+        if self.duty is not None:
+            if self.wave != "pulse":
+                raise ValueError(
+                    f"duty = {self.duty!r} applies to wave='pulse' only; add wave=pulse or drop duty"
+                )
+            if not 0 < self.duty <= 1:
+                raise ValueError(f"duty = {self.duty!r} must be in (0, 1]: the fraction of the edges in the pulse")
         if not 0 <= self.eps < 1:
             raise ValueError(f"eps = {self.eps!r} must be in [0, 1)")
         if not self.omega >= 0:
@@ -85,7 +109,7 @@ class InchingWave(BaselinePolicy):
 
     Args:
         env: SoftWorm env (or a DummyVecEnv of them).
-        eps, omega, delta_l, direction, l0: see :class:`InchingParams`.
+        eps, omega, delta_l, direction, l0, rest_gain, wave, duty: see :class:`InchingParams`.
     """
 
     name = "inching"
@@ -99,14 +123,26 @@ class InchingWave(BaselinePolicy):
         p = self.params
         self.delta_l = 2 * math.pi / self.n_outputs if p.delta_l is None else p.delta_l
         self.l0 = self.layout.edge_length if p.l0 is None else p.l0
+        self.duty = (PULSE_DUTY if p.duty is None else p.duty) if p.wave == "pulse" else 1.0
         self.state_size = 1
+        peak = 0.5 * self.l0 * p.eps * p.omega / self.duty
+        if peak > self.layout.action_scale:
+            warnings.warn(
+                f"{self.name}: the {p.wave} wave's peak rate 0.5 l0 eps omega / duty = {peak:.3g} m/s "
+                f"exceeds the env's max_length_rate = {self.layout.action_scale:.3g} m/s and will be "
+                "clipped; raise max_length_rate or duty, or lower eps or omega",
+                stacklevel=3,
+            )
 
     def desired(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(lbar_des, lbar_dot_des)`` at times t (n_envs,), each (n_envs, N-1)."""
         p = self.params
-        out = [
-            length_wave(ti, self.n_outputs, self.l0, p.eps, p.omega, self.delta_l, p.direction) for ti in t
-        ]
+        if p.wave == "pulse":
+            out = [pulse_wave(ti, self.n_outputs, self.l0, p.eps, p.omega, self.delta_l, self.duty, p.direction)
+                   for ti in t]
+        else:
+            out = [length_wave(ti, self.n_outputs, self.l0, p.eps, p.omega, self.delta_l, p.direction)
+                   for ti in t]
         return np.array([o[0] for o in out]), np.array([o[1] for o in out])
 
     def _control(self, obs, state):
@@ -126,7 +162,7 @@ class InchingPID(InchingWave):
 
     Args:
         env: SoftWorm env (or a DummyVecEnv of them).
-        eps, omega, delta_l, direction, l0, Kp: see :class:`InchingPIDParams`.
+        eps, omega, delta_l, direction, l0, wave, duty, Kp: see :class:`InchingPIDParams`.
     """
 
     name = "inching-pid"

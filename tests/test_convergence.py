@@ -1,0 +1,210 @@
+"""Convergence in the time step (MODEL.md §5a, §10): every baseline, the shipped agents and a
+fixed seeded random-action sequence give the same episode metrics at the default integration
+step and with it divided by 4 and 16 (5 % in water, 10 % on the ground), and the
+``soft-snake convergence`` command that prints the table.
+
+The cases in :data:`KNOWN_FAILING` do not converge on today's model (ground contact decided
+inside the step and material damping arrive with issue 9 items 2 and 4); they are strict
+``xfail``: the day one converges, the suite says so and its entry must be removed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from gymnasium.spaces import Box
+
+import soft_snake_gym  # noqa: F401 - registers the ids
+from soft_snake_gym.cli import main
+from soft_snake_gym.config import ConfigError
+from soft_snake_gym.convergence import (
+    ABSOLUTE_TOLERANCE,
+    ConvergenceResult,
+    RandomActions,
+    convergence,
+    format_convergence,
+)
+
+EEL = [
+    "open-loop",
+    "pid",  # gains (10, 1, 5)
+    "pid:Kd=2,Ki=1",  # gains (10, 2, 1)
+    "decentralized",  # circulant closure
+    "decentralized:closure=pacemaker",
+    "zoo:ppo",
+    "random",
+]
+WORM = [
+    "inching",
+    "inching-pid",
+    "inching:wave=pulse",
+    "inching-pid:wave=pulse",
+    "zoo:ppo",
+    "random",
+]
+CASES = [("SoftEel-v0", s) for s in EEL] + [("SoftWorm-v0", s) for s in WORM]
+
+#: (env, policy) -> what does not converge today (measured at factors 1, 4, 16, seed 0; the
+#: ratios are value / value at h/16, for h = 0.01 s, h/4, h/16).
+KNOWN_FAILING = {
+    ("SoftEel-v0", "open-loop"): "fluid power 0.950, 0.986 (5.02 % > 5 %)",
+    ("SoftEel-v0", "pid"): "backward Euler's numerical damping holds the closed loop: speed 1.39, 1.39; "
+    "actuator energy 0.23, 0.33; curvature error 0.029, 0.079",
+    ("SoftEel-v0", "pid:Kd=2,Ki=1"): "speed 2.90, 2.71; curvature error 0.029, 0.29",
+    ("SoftEel-v0", "decentralized"): "speed 0.127, -0.005, -0.0004 m/s; curvature error 0.035, 0.82",
+    ("SoftEel-v0", "decentralized:closure=pacemaker"): "speed 0.119, 0.030, -0.002 m/s; curv. error 0.83",
+    ("SoftEel-v0", "random"): "fluid power 0.47, 0.71; actuator energy 0.95, 0.93",
+    ("SoftWorm-v0", "inching"): "distance 0.10, 0.008, 0.003 m",
+    ("SoftWorm-v0", "inching-pid"): "distance 0.105, 0.0087, 0.0066 m",
+    ("SoftWorm-v0", "zoo:ppo"): "distance 2.33, 0.38, 0.35 m; actuator energy 1.70, 1.19",
+    ("SoftWorm-v0", "random"): "distance 4.9, 0.1, -10.6 mm; friction energy 0.47, 0.70",
+}
+
+
+def _case(env_id: str, spec: str):
+    reason = KNOWN_FAILING.get((env_id, spec))
+    marks = [pytest.mark.xfail(reason=reason, strict=True, raises=AssertionError)] if reason else []
+    return pytest.param(env_id, spec, marks=marks, id=f"{env_id}-{spec}")
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+@pytest.mark.parametrize(("env_id", "spec"), [_case(*c) for c in CASES])
+def test_episode_metrics_do_not_depend_on_the_time_step(env_id, spec):
+    result = convergence(env_id, spec, factors=(1, 4, 16), seed=0)
+    assert result.substeps == [1, 4, 16]
+    assert not any(result.failures), format_convergence(result)
+    checked = [m for m in result.values if result.passed(m) is not None]
+    # every metric but the tracking error (which a trained agent or random actions lack) is defined
+    assert len(checked) >= 3
+    assert result.ok, "\n" + format_convergence(result)
+
+
+def _result(values: dict[str, list[float]], medium: str = "water", failures=None) -> ConvergenceResult:
+    n = len(next(iter(values.values())))
+    return ConvergenceResult(
+        env_id="X",
+        policy="p",
+        medium=medium,
+        factors=[4**i for i in range(n)],
+        substeps=[4**i for i in range(n)],
+        h=[0.01 / 4**i for i in range(n)],
+        values=values,
+        failures=failures or [""] * n,
+        rtol={"water": 0.05, "ground": 0.10}[medium],
+        atol={m: ABSOLUTE_TOLERANCE[m] for m in values},
+    )
+
+
+def test_the_decision_rule_is_relative_to_the_finest_run_with_an_absolute_floor():
+    r = _result({"average_speed": [0.104, 0.101, 0.1], "energy_actuator": [62.9, 61.0, 60.0]})
+    assert r.passed("average_speed") and r.passed("energy_actuator") and r.ok  # 4 %, 4.8 %
+    r = _result({"average_speed": [0.106, 0.1, 0.1]})
+    assert r.passed("average_speed") is False and not r.ok  # 6 % > 5 % in water
+    assert _result({"average_speed": [0.106, 0.1, 0.1]}, medium="ground").passed("average_speed")  # 10 %
+    # near zero the absolute tolerance decides: 0.9 mm/s off a speed of 0.1 mm/s passes, 1.1 does not
+    assert _result({"average_speed": [0.0010, 0.0001, 0.0001]}).passed("average_speed")
+    assert not _result({"average_speed": [0.0012, 0.0001, 0.0001]}).passed("average_speed")
+    # a metric no run defines is not checked; a failed episode fails everything
+    r = _result({"average_speed": [0.1, 0.1, 0.1], "curvature_error": [math.nan] * 3})
+    assert r.passed("curvature_error") is None and r.ok
+    r = _result({"average_speed": [0.1, 0.1, 0.1]}, failures=["", "self_intersection", ""])
+    assert r.passed("average_speed") is False and not r.ok
+
+
+def test_random_actions_are_one_fixed_sequence_per_seed():
+    space = Box(-1.0, 1.0, (9,), np.float32)
+    obs = np.zeros((1, 5))
+    a, b = RandomActions(space, seed=3, scale=0.5), RandomActions(space, seed=3, scale=0.5)
+    first = [a.predict(obs, None, np.array([i == 0]))[0] for i in range(20)]
+    again = [a.predict(obs, None, np.array([i == 0]))[0] for i in range(20)]  # a new episode restarts it
+    other = [b.predict(obs, None, np.array([i == 0]))[0] for i in range(20)]
+    assert np.array_equal(first, again) and np.array_equal(first, other)
+    assert first[0].shape == (1, 9) and np.abs(first).max() <= 0.5 and np.abs(first).max() > 0.4
+    assert not np.array_equal(first[0], first[1])
+    c = RandomActions(space, seed=4)
+    assert not np.array_equal(first[0], c.predict(obs, None, np.array([True]))[0])
+    for bad in (0.0, 1.5, -1.0, True):
+        with pytest.raises(ValueError, match="scale"):
+            RandomActions(space, scale=bad)
+
+
+def test_bad_factors_and_policies_are_rejected_before_any_episode():
+    for factors, match in (
+        ((1,), "at least two"),
+        ((0, 4), "at least two"),
+        ((4, 4), "repeat"),
+        ((1, 2.5), "integers"),
+    ):
+        with pytest.raises(ConfigError, match=match):
+            convergence("SoftWorm-v0", "inching", factors=factors)
+    with pytest.raises(ConfigError, match="unknown key 'scal'"):
+        convergence("SoftWorm-v0", "random:scal=0.5")
+    with pytest.raises(ConfigError, match="scale = 2"):
+        convergence("SoftWorm-v0", "random:scale=2")
+
+
+def test_refinement_multiplies_the_configured_substeps_and_changes_the_step():
+    # two internal steps in the user's config: the refinements take 2 * factor
+    r = convergence(
+        "SoftEel-v0",
+        "pid",
+        env_kwargs={"integrator": {"substeps": 2}, "max_episode_steps": 150},
+        factors=(1, 4),
+        transient=0.5,
+    )
+    assert r.substeps == [2, 8] and r.h == pytest.approx([0.005, 0.00125])
+    # the runs really differ in their step: the closed loop's curvature error changes with it
+    err = r.values["curvature_error"]
+    assert err[0] != err[1] and all(np.isfinite(err))
+
+
+def test_cli_prints_the_table_writes_json_and_exit_code_says_converged(capsys, tmp_path):
+    path = tmp_path / "c.json"
+    code = main(
+        [
+            "convergence",
+            "SoftWorm-v0",
+            "--policy",
+            "inching-pid:wave=pulse",
+            "--factors",
+            "1",
+            "4",
+            "--max-steps",
+            "200",
+            "--transient",
+            "0.5",
+            "--json",
+            str(path),
+        ]
+    )
+    out = capsys.readouterr().out
+    assert code == 0, out
+    for label in ("distance", "friction energy", "actuator energy", "length error", "PASS", "converged"):
+        assert label in out
+    data = json.loads(path.read_text())
+    assert data["ok"] and data["substeps"] == [1, 4]
+    dist = data["metrics"]["distance"]["values"]
+    assert f"{dist[0]:.4g}" in out and dist[0] > 0
+    # the sinusoidal wave's distance is made by the step (issue 9): exit code 1 and FAIL
+    code = main(
+        [
+            "convergence",
+            "SoftWorm-v0",
+            "--policy",
+            "inching",
+            "--factors",
+            "1",
+            "16",
+            "--max-steps",
+            "200",
+            "--transient",
+            "0.5",
+        ]
+    )
+    out = capsys.readouterr().out
+    assert code == 1 and "FAIL" in out and "NOT converged" in out
+    code = main(["convergence", "SoftWorm-v0", "--policy", "inching:wave=sine,duty=0.5"])
+    assert code == 2 and "duty" in capsys.readouterr().err
