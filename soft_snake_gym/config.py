@@ -23,8 +23,15 @@ import yaml
 from soft_snake_gym.params import SimConfig
 
 __all__ = [
-    "ConfigError", "load_yaml", "from_dict", "to_dict", "load_sim_config", "PRESET_SECTIONS",
-    "presets", "load_preset", "with_preset",
+    "ConfigError",
+    "load_yaml",
+    "from_dict",
+    "to_dict",
+    "load_sim_config",
+    "PRESET_SECTIONS",
+    "presets",
+    "load_preset",
+    "with_preset",
 ]
 
 T = TypeVar("T")

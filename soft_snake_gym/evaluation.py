@@ -10,7 +10,9 @@ Per episode:
 - ``tracking_error``: mean over the same window and over nodes of ``|desired - measured|``,
   curvature [-] on the eel, edge length [m] on the worm; only for the baseline policies
   (NaN for a trained model, which has no reference);
-- ``mean_fluid_power`` [W] / ``energy_fluid`` [J] in water, ``energy_friction`` [J] on land;
+- ``mean_fluid_power`` [W] (over the whole episode) / ``energy_fluid`` [J] in water,
+  ``window_fluid_power`` [W] (mean over the same window as the speed), ``energy_friction`` [J]
+  on land;
 - ``energy_actuator`` [J] and ``cost_of_transport`` [-] (the env's, MODEL.md §8);
 - ``failure``: the env's failure reason, or "".
 """
@@ -86,6 +88,8 @@ class _Running:
     speed_sum: float = 0.0
     error_sum: float = 0.0
     error_n: int = 0
+    power_sum: float = 0.0
+    all_power_sum: float = 0.0
     ret: float = 0.0
     all_speed_sum: float = 0.0
     all_error_sum: float = 0.0
@@ -119,13 +123,16 @@ class EpisodeRecorder:
         err = getattr(policy, "last_error", None)
         e = float(np.mean(err[i])) if err is not None else math.nan
         speed = float(info.get("forward_speed", 0.0))
+        power = float(info.get("fluid_power", math.nan))
         run.all_speed_sum += speed
+        run.all_power_sum += power
         if err is not None:
             run.all_error_sum += e
             run.all_error_n += 1
         if run.steps * self.dt > self.transient + 1e-9:
             run.window_steps += 1
             run.speed_sum += speed
+            run.power_sum += power
             if err is not None:
                 run.error_sum += e
                 run.error_n += 1
@@ -141,9 +148,11 @@ class EpisodeRecorder:
         use_window = run.window_steps > 0 and duration >= 2 * self.transient
         if use_window:
             speed = run.speed_sum / run.window_steps
+            power = run.power_sum / run.window_steps
             error = run.error_sum / run.error_n if run.error_n else math.nan
         else:
             speed = run.all_speed_sum / run.steps
+            power = run.all_power_sum / run.steps
             error = run.all_error_sum / run.all_error_n if run.all_error_n else math.nan
         out: dict[str, Any] = {
             "return": run.ret,
@@ -159,6 +168,7 @@ class EpisodeRecorder:
         if "energy_fluid" in m:
             out["energy_fluid"] = float(m["energy_fluid"])
             out["mean_fluid_power"] = float(m["energy_fluid"]) / duration if duration > 0 else math.nan
+            out["window_fluid_power"] = power
         if "energy_friction" in m:
             out["energy_friction"] = float(m["energy_friction"])
         return out
