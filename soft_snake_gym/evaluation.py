@@ -6,6 +6,9 @@ Per episode:
 - ``return``: the sum of rewards; ``steps``; ``duration`` [s];
 - ``average_speed`` [m/s]: centre-of-mass progress along the goal per time, over the window
   after ``transient`` seconds (the whole episode if it is shorter than twice that);
+- ``com_speed`` [m/s]: the centre of mass's displacement over the same window, whatever its
+  direction, divided by the window's duration (MODEL.md §8's average speed; equal to
+  ``average_speed`` for a robot that swims straight along the goal);
 - ``distance`` [m]: progress along the goal over the whole episode;
 - ``tracking_error``: mean over the same window and over nodes of ``|desired - measured|``,
   curvature [-] on the eel, edge length [m] on the worm; only for the baseline policies
@@ -90,6 +93,8 @@ class _Running:
     error_n: int = 0
     power_sum: float = 0.0
     all_power_sum: float = 0.0
+    last_com: tuple[float, float] | None = None
+    window_com: tuple[float, float] | None = None  # centre of mass where the window starts
     ret: float = 0.0
     all_speed_sum: float = 0.0
     all_error_sum: float = 0.0
@@ -129,13 +134,17 @@ class EpisodeRecorder:
         if err is not None:
             run.all_error_sum += e
             run.all_error_n += 1
+        com = (float(info.get("x_position", math.nan)), float(info.get("y_position", math.nan)))
         if run.steps * self.dt > self.transient + 1e-9:
+            if run.window_steps == 0:
+                run.window_com = run.last_com
             run.window_steps += 1
             run.speed_sum += speed
             run.power_sum += power
             if err is not None:
                 run.error_sum += e
                 run.error_n += 1
+        run.last_com = com
         if self.on_step is not None:
             self.on_step(i, info)
         if done:
@@ -146,8 +155,11 @@ class EpisodeRecorder:
         m = dict(info.get("metrics", {}))
         duration = run.steps * self.dt
         use_window = run.window_steps > 0 and duration >= 2 * self.transient
+        com_speed = float(m.get("displacement", math.nan)) / duration if duration > 0 else math.nan
         if use_window:
             speed = run.speed_sum / run.window_steps
+            if run.window_com is not None:
+                com_speed = math.dist(run.last_com, run.window_com) / (run.window_steps * self.dt)
             power = run.power_sum / run.window_steps
             error = run.error_sum / run.error_n if run.error_n else math.nan
         else:
@@ -159,6 +171,7 @@ class EpisodeRecorder:
             "steps": run.steps,
             "duration": duration,
             "average_speed": speed,
+            "com_speed": com_speed,
             "distance": float(m.get("distance", math.nan)),
             self.error_key: error,
             "energy_actuator": float(m.get("energy_actuator", math.nan)),

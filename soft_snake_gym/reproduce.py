@@ -321,7 +321,8 @@ def headline_case(
 
     Returns:
         One row per (model, controller, alpha): ``model``, ``controller``, ``alpha`` [rad],
-        ``omega`` [rad/s], ``speed_cm_s`` (steady-state speed along +x [cm/s]),
+        ``omega`` [rad/s], ``speed_cm_s`` (steady-state speed: the centre of mass's displacement
+        over the window, whatever its direction, per time [cm/s]),
         ``fluid_power`` [W] and ``curvature_error`` [-] (means over the steady-state window),
         ``failure`` ("" if none).
     """
@@ -356,7 +357,7 @@ def headline_case(
                         "controller": controller,
                         "alpha": alpha,
                         "omega": HEADLINE_OMEGA,
-                        "speed_cm_s": 100.0 * ep["average_speed"],
+                        "speed_cm_s": 100.0 * ep["com_speed"],
                         "fluid_power": ep["window_fluid_power"],
                         "curvature_error": ep["curvature_error"],
                         "failure": ep["failure"],
@@ -419,8 +420,9 @@ marked "fail" in the heatmaps.
 The actual-curvature PID with gains (10, 1, 5) and the open loop at omega = 2 pi/3 rad/s, each
 starting at rest on its gait (curvatures and rest curvatures equal to the desired ones at
 t = 0, no start noise: the env keyword `start_on_gait`, `soft-snake evaluate --start-on-gait`),
-default stiffness (E = 1.875e6 Pa). Speed (centre-of-mass progress along +x), fluid power and
-mean curvature error `|kappa_des - kappa|` are averaged over {extras.get("headline_window", "the steady state")}.
+default stiffness (E = 1.875e6 Pa). Speed (the centre of mass's displacement over the window,
+whatever its direction, per time: started on the gait, the body does not swim exactly along its
+initial chord), fluid power and mean curvature error `|kappa_des - kappa|` are averaged over {extras.get("headline_window", "the steady state")}.
 "default" is the package's physics; "thesis preset" is `preset="thesis"`, the sources'
 setting (no material damping, Kelasidi added mass), whose closed-loop results depend on the
 integration step. Computed by `soft-snake reproduce --headline-only` (which prints this table

@@ -135,3 +135,16 @@ def test_unknown_preset_lists_the_available_ones(tmp_path, name, message):
     path.write_text(f"preset: {name}\n")
     with pytest.raises(ConfigError, match="bad.yaml: " + message):
         load_sim_config(path)
+
+
+def test_presets_are_shipped_as_package_data():
+    import fnmatch
+
+    tomllib = pytest.importorskip("tomllib")
+    root = CONFIGS.parent
+    globs = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    files = sorted((root / "soft_snake_gym" / "configs" / "presets").glob("*.yaml"))
+    assert files
+    for f in files:
+        rel = f.relative_to(root / "soft_snake_gym").as_posix()
+        assert any(fnmatch.fnmatch(rel, g) for g in globs["soft_snake_gym"]), rel

@@ -91,6 +91,33 @@ def test_windowed_fluid_power_is_the_mean_of_the_step_powers():
     assert ep["window_fluid_power"] != pytest.approx(ep["mean_fluid_power"], rel=1e-3)
 
 
+def test_com_speed_is_the_displacement_over_the_window_whatever_its_direction():
+    import gymnasium as gym
+    import numpy as np
+
+    from soft_snake_gym.evaluation import evaluate, make_eval_env
+    from soft_snake_gym.policies import make_policy
+
+    kwargs = {"max_episode_steps": 200, "goal_direction": 0.5}
+    ep = evaluate(
+        make_policy("open-loop", make_eval_env("SoftEel-v0", env_kwargs=kwargs)),
+        make_eval_env("SoftEel-v0", env_kwargs=kwargs),
+        episodes=1,
+        transient=1.0,
+    )[0]
+    env = gym.make("SoftEel-v0", **kwargs)  # the same episode by hand
+    policy = make_policy("open-loop", env)
+    obs, _ = env.reset(seed=0)
+    state, com = None, {}
+    for step in range(1, 201):
+        action, state = policy.predict(obs[None], state, np.array([step == 1]))
+        obs, *_ = env.step(action[0])
+        com[step] = env.unwrapped.sim.com
+    assert ep["com_speed"] == pytest.approx(np.linalg.norm(com[200] - com[100]) / 1.0, rel=1e-9)
+    # along a goal 0.5 rad off the swimming direction, progress is slower than the speed
+    assert ep["average_speed"] < 0.95 * ep["com_speed"]
+
+
 def test_headline_rejects_bad_arguments():
     with pytest.raises(ValueError, match="cycles = 0 > 0"):
         headline_case(cycles=0)
