@@ -167,8 +167,8 @@ def policy_gait(spec: str, config: str | Path | None = None) -> dict[str, Any]:
     if cls is None or not issubclass(cls.Params, SerpenoidParams):
         raise ConfigError(
             f"policy {spec!r} has no serpenoid gait to start on; starting on the gait takes it from "
-            f"one of {', '.join(serpenoid)}. For another policy, give the gait to the env: "
-            "--env-kwarg start_on_gait.alpha=pi/6 (and omega, delta, gamma, psi0 as needed)"
+            f"one of {', '.join(serpenoid)}. For another policy, give the env the gait itself: "
+            "start_on_gait={'alpha': ...} (on the command line --env-kwarg start_on_gait.alpha=pi/6)"
         )
     name, params = parse_policy_spec(spec)
     if config is not None:
