@@ -91,6 +91,9 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--env-config", metavar="YAML", help="YAML file of env keywords")
     p.add_argument("--env-kwarg", action="append", metavar="KEY=VALUE",
                    help="env keyword, repeatable; dotted keys reach sections (rod.E_bend=1.87e4)")
+    p.add_argument("--start-on-gait", action="store_true",
+                   help="start at rest on the policy's own serpenoid gait (curvatures = desired at t = 0, "
+                        "no start noise): the env keyword start_on_gait, for open-loop, pid, decentralized")
     p.add_argument("--json", metavar="PATH", help="also write the per-episode metrics and summary")
     p.add_argument("--video", metavar="PATH", help="record the first episode (.mp4 or .gif)")
 
@@ -98,13 +101,17 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
 @subcommand("evaluate", "evaluate a baseline or a trained model for K episodes", _evaluate_arguments)
 def _evaluate(args: argparse.Namespace) -> int:
     from soft_snake_gym.evaluation import evaluate, format_table, make_eval_env, summarize
-    from soft_snake_gym.policies import make_policy
+    from soft_snake_gym.policies import make_policy, policy_gait
 
     if args.episodes < 1:
         raise CLIError(f"--episodes {args.episodes} must be at least 1")
     if args.video and Path(args.video).suffix.lower() not in (".mp4", ".gif"):
         raise CLIError(f"--video {args.video!r} must end in .mp4 or .gif")
     env_kwargs = _parse_env_kwargs(args.env_kwarg)
+    if args.start_on_gait:
+        if "start_on_gait" in env_kwargs:
+            raise CLIError("--start-on-gait takes the gait from the policy; drop --env-kwarg start_on_gait...")
+        env_kwargs["start_on_gait"] = policy_gait(args.policy, args.policy_config)
     if args.env_config:
         env_kwargs["config"] = args.env_config
     if args.max_steps is not None:

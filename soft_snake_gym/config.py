@@ -2,7 +2,9 @@
 
 ``load_yaml`` reads a file and explains what is wrong with it (missing, malformed, not a
 mapping); ``from_dict`` builds a dataclass, recursing into nested dataclass fields and
-rejecting unknown keys with the closest valid name. Nothing is ``eval``'d.
+rejecting unknown keys with the closest valid name; ``with_preset`` lays a named preset
+(a YAML file of simulator sections shipped in ``soft_snake_gym/configs/presets``) beneath a
+mapping. Nothing is ``eval``'d.
 """
 
 from __future__ import annotations
@@ -20,7 +22,17 @@ import yaml
 
 from soft_snake_gym.params import SimConfig
 
-__all__ = ["ConfigError", "load_yaml", "from_dict", "to_dict", "load_sim_config"]
+__all__ = [
+    "ConfigError",
+    "load_yaml",
+    "from_dict",
+    "to_dict",
+    "load_sim_config",
+    "PRESET_SECTIONS",
+    "presets",
+    "load_preset",
+    "with_preset",
+]
 
 T = TypeVar("T")
 
@@ -164,5 +176,66 @@ def to_dict(obj: Any) -> dict[str, Any]:
 
 def load_sim_config(path: str | Path) -> SimConfig:
     """Load a :class:`SimConfig` from a YAML file (sections rod, medium, fluid, ground,
-    integrator; any may be left out for its default)."""
-    return from_dict(SimConfig, load_yaml(path), where=f"{Path(path).name}")
+    integrator; any may be left out for its default; a ``preset`` key lays that preset beneath
+    the file's sections, see :func:`with_preset`)."""
+    where = Path(path).name
+    return from_dict(SimConfig, with_preset(load_yaml(path), where), where=where)
+
+
+# --- presets ------------------------------------------------------------------------------------
+_PRESET_DIR = Path(__file__).parent / "configs" / "presets"
+
+#: The sections a preset may set: those of :class:`SimConfig` that describe the physics.
+PRESET_SECTIONS = ("rod", "fluid", "ground", "integrator")
+
+
+def presets() -> list[str]:
+    """Names of the presets shipped with the package (``thesis``: the sources' setting)."""
+    return sorted(p.stem for p in _PRESET_DIR.glob("*.yaml"))
+
+
+def load_preset(name: str) -> dict[str, dict[str, Any]]:
+    """The sections of preset ``name``: a mapping of :data:`PRESET_SECTIONS` to field values.
+
+    Raises:
+        ConfigError: ``name`` is not a shipped preset (the message lists them), or the preset
+            file holds anything but simulator sections.
+    """
+    available = presets()
+    if not isinstance(name, str) or name not in available:
+        close = difflib.get_close_matches(str(name), available, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ConfigError(f"preset = {name!r} is unknown{hint}; available presets: {', '.join(available)}")
+    data = load_yaml(_PRESET_DIR / f"{name}.yaml")
+    for key, value in data.items():
+        if key not in PRESET_SECTIONS or not isinstance(value, dict):
+            raise ConfigError(
+                f"preset {name!r} sets {key!r}: a preset holds only the sections "
+                f"{', '.join(PRESET_SECTIONS)}, each a mapping"
+            )
+    return data
+
+
+def with_preset(data: dict[str, Any], where: str = "the configuration") -> dict[str, Any]:
+    """``data`` without its ``preset`` key, laid over that preset's sections.
+
+    Keys given in ``data`` win field by field: ``{"preset": "thesis", "rod": {"E_bend": 1e5}}``
+    keeps the preset's rod damping and sets ``E_bend``. A section given as a dataclass (a
+    whole :class:`~soft_snake_gym.params.Rod`, say) replaces the preset's section. Without a
+    ``preset`` key (or with ``preset: null``) ``data`` is returned unchanged.
+
+    Raises:
+        ConfigError: an unknown preset name (see :func:`load_preset`).
+    """
+    if data.get("preset") is None:
+        return {k: v for k, v in data.items() if k != "preset"}
+    data = dict(data)
+    name = data.pop("preset")
+    try:
+        merged: dict[str, Any] = load_preset(name)
+    except ConfigError as err:
+        raise ConfigError(f"{where}: {err}") from None
+    for key, value in data.items():
+        base = merged.get(key)
+        merged[key] = {**base, **value} if isinstance(base, dict) and isinstance(value, dict) else value
+    return merged

@@ -6,11 +6,16 @@ Per episode:
 - ``return``: the sum of rewards; ``steps``; ``duration`` [s];
 - ``average_speed`` [m/s]: centre-of-mass progress along the goal per time, over the window
   after ``transient`` seconds (the whole episode if it is shorter than twice that);
+- ``com_speed`` [m/s]: the centre of mass's displacement over the same window, whatever its
+  direction, divided by the window's duration (MODEL.md §8's average speed; equal to
+  ``average_speed`` for a robot that swims straight along the goal);
 - ``distance`` [m]: progress along the goal over the whole episode;
 - ``tracking_error``: mean over the same window and over nodes of ``|desired - measured|``,
   curvature [-] on the eel, edge length [m] on the worm; only for the baseline policies
   (NaN for a trained model, which has no reference);
-- ``mean_fluid_power`` [W] / ``energy_fluid`` [J] in water, ``energy_friction`` [J] on land;
+- ``mean_fluid_power`` [W] (over the whole episode) / ``energy_fluid`` [J] in water,
+  ``window_fluid_power`` [W] (mean over the same window as the speed), ``energy_friction`` [J]
+  on land;
 - ``energy_actuator`` [J] and ``cost_of_transport`` [-] (the env's, MODEL.md §8);
 - ``failure``: the env's failure reason, or "".
 """
@@ -86,6 +91,10 @@ class _Running:
     speed_sum: float = 0.0
     error_sum: float = 0.0
     error_n: int = 0
+    power_sum: float = 0.0
+    all_power_sum: float = 0.0
+    last_com: tuple[float, float] | None = None
+    window_com: tuple[float, float] | None = None  # centre of mass where the window starts
     ret: float = 0.0
     all_speed_sum: float = 0.0
     all_error_sum: float = 0.0
@@ -119,16 +128,23 @@ class EpisodeRecorder:
         err = getattr(policy, "last_error", None)
         e = float(np.mean(err[i])) if err is not None else math.nan
         speed = float(info.get("forward_speed", 0.0))
+        power = float(info.get("fluid_power", math.nan))
         run.all_speed_sum += speed
+        run.all_power_sum += power
         if err is not None:
             run.all_error_sum += e
             run.all_error_n += 1
+        com = (float(info.get("x_position", math.nan)), float(info.get("y_position", math.nan)))
         if run.steps * self.dt > self.transient + 1e-9:
+            if run.window_steps == 0:
+                run.window_com = run.last_com
             run.window_steps += 1
             run.speed_sum += speed
+            run.power_sum += power
             if err is not None:
                 run.error_sum += e
                 run.error_n += 1
+        run.last_com = com
         if self.on_step is not None:
             self.on_step(i, info)
         if done:
@@ -139,17 +155,23 @@ class EpisodeRecorder:
         m = dict(info.get("metrics", {}))
         duration = run.steps * self.dt
         use_window = run.window_steps > 0 and duration >= 2 * self.transient
+        com_speed = float(m.get("displacement", math.nan)) / duration if duration > 0 else math.nan
         if use_window:
             speed = run.speed_sum / run.window_steps
+            if run.window_com is not None:
+                com_speed = math.dist(run.last_com, run.window_com) / (run.window_steps * self.dt)
+            power = run.power_sum / run.window_steps
             error = run.error_sum / run.error_n if run.error_n else math.nan
         else:
             speed = run.all_speed_sum / run.steps
+            power = run.all_power_sum / run.steps
             error = run.all_error_sum / run.all_error_n if run.all_error_n else math.nan
         out: dict[str, Any] = {
             "return": run.ret,
             "steps": run.steps,
             "duration": duration,
             "average_speed": speed,
+            "com_speed": com_speed,
             "distance": float(m.get("distance", math.nan)),
             self.error_key: error,
             "energy_actuator": float(m.get("energy_actuator", math.nan)),
@@ -159,6 +181,7 @@ class EpisodeRecorder:
         if "energy_fluid" in m:
             out["energy_fluid"] = float(m["energy_fluid"])
             out["mean_fluid_power"] = float(m["energy_fluid"]) / duration if duration > 0 else math.nan
+            out["window_fluid_power"] = power
         if "energy_friction" in m:
             out["energy_friction"] = float(m["energy_friction"])
         return out

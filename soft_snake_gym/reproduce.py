@@ -1,5 +1,5 @@
-"""``soft-snake reproduce``: every sweep, both trajectory figures, and
-``docs/thesis_reproduction.md`` with the finding-by-finding table, computed from the CSVs.
+"""``soft-snake reproduce``: every sweep, both trajectory figures, the sources' headline case,
+and ``docs/thesis_reproduction.md`` with the finding-by-finding table, computed from the CSVs.
 
 Each finding the thesis states in words is turned into a count over the grid cells (how many
 comparisons go the stated way), so the verdict is a number, not an impression: **yes** when at
@@ -18,7 +18,7 @@ import numpy as np
 
 from soft_snake_gym.cli import subcommand
 
-__all__ = ["findings", "write_report", "reproduce"]
+__all__ = ["findings", "headline_case", "headline_table", "headline_window", "write_report", "reproduce"]
 
 
 def _ok(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -284,6 +284,103 @@ def _land_numbers(inch: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+#: The sources' headline case (issue 9, item 6): the thesis gait's frequency, two amplitudes, the
+#: actual-curvature PID with gains (10, 1, 5) and the open loop, for each physics model.
+HEADLINE_OMEGA = 2 * math.pi / 3
+HEADLINE_ALPHAS = (math.pi / 6, math.pi / 3)
+HEADLINE_CONTROLLERS = {
+    "PID (10, 1, 5)": ("pid", {"Kp": 10, "Kd": 1, "Ki": 5}),
+    "open loop": ("open-loop", {}),
+}
+HEADLINE_MODELS = {"default": None, "thesis preset": "thesis"}
+
+
+def headline_window(transient_cycles: float = 2, cycles: float = 2) -> str:
+    """In words, the window :func:`headline_case` averages over."""
+    period = 2 * math.pi / HEADLINE_OMEGA
+    start, end = transient_cycles * period, (transient_cycles + cycles) * period
+    return f"{cycles:g} gait periods, {start:.3g}-{end:.3g} s, after {transient_cycles:g} periods of start-up transient"
+
+
+def headline_case(
+    transient_cycles: float = 2,
+    cycles: float = 2,
+    models: tuple[str, ...] | None = None,
+    alphas: tuple[float, ...] = HEADLINE_ALPHAS,
+) -> list[dict[str, Any]]:
+    """The sources' headline case on ``SoftEel-v0``: each controller of
+    :data:`HEADLINE_CONTROLLERS` at omega = 2 pi/3 rad/s and each amplitude, starting at rest on
+    its gait (``start_on_gait``, no start noise), for each physics model of
+    :data:`HEADLINE_MODELS` (the package defaults and the ``thesis`` preset).
+
+    Args:
+        transient_cycles: gait periods left out as the start-up transient.
+        cycles: gait periods the steady-state metrics are averaged over.
+        models: keys of :data:`HEADLINE_MODELS` (default: all).
+        alphas: gait amplitudes [rad].
+
+    Returns:
+        One row per (model, controller, alpha): ``model``, ``controller``, ``alpha`` [rad],
+        ``omega`` [rad/s], ``speed_cm_s`` (steady-state speed: the centre of mass's displacement
+        over the window, whatever its direction, per time [cm/s]),
+        ``fluid_power`` [W] and ``curvature_error`` [-] (means over the steady-state window),
+        ``failure`` ("" if none).
+    """
+    from soft_snake_gym.evaluation import evaluate, make_eval_env
+    from soft_snake_gym.policies import make_policy, policy_gait
+
+    if transient_cycles < 0 or cycles <= 0:
+        raise ValueError(f"transient_cycles = {transient_cycles!r} must be >= 0 and cycles = {cycles!r} > 0")
+    models = tuple(HEADLINE_MODELS) if models is None else models
+    unknown = [m for m in models if m not in HEADLINE_MODELS]
+    if unknown:
+        raise ValueError(f"models {unknown} are unknown; choose from {list(HEADLINE_MODELS)}")
+    period = 2 * math.pi / HEADLINE_OMEGA
+    rows = []
+    for model in models:
+        for alpha in alphas:
+            for controller, (name, options) in HEADLINE_CONTROLLERS.items():
+                gait = {**options, "alpha": alpha, "omega": HEADLINE_OMEGA}
+                spec = f"{name}:" + ",".join(f"{k}={v!r}" for k, v in gait.items())
+                env_kwargs: dict[str, Any] = {
+                    "start_on_gait": policy_gait(spec),
+                    "max_episode_steps": int(round((transient_cycles + cycles) * period / 0.01)),
+                }
+                if HEADLINE_MODELS[model] is not None:
+                    env_kwargs["preset"] = HEADLINE_MODELS[model]
+                env = make_eval_env("SoftEel-v0", seed=0, env_kwargs=env_kwargs)
+                ep = evaluate(make_policy(spec, env), env, episodes=1, transient=transient_cycles * period)[0]
+                env.close()
+                rows.append(
+                    {
+                        "model": model,
+                        "controller": controller,
+                        "alpha": alpha,
+                        "omega": HEADLINE_OMEGA,
+                        "speed_cm_s": 100.0 * ep["com_speed"],
+                        "fluid_power": ep["window_fluid_power"],
+                        "curvature_error": ep["curvature_error"],
+                        "failure": ep["failure"],
+                    }
+                )
+    return rows
+
+
+def headline_table(rows: list[dict[str, Any]]) -> str:
+    """The rows of :func:`headline_case` as a Markdown table."""
+    lines = [
+        "| model | controller | alpha [rad] | speed [cm/s] | fluid power [W] | curvature error [-] |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        tail = f" (failed: {r['failure']})" if r["failure"] else ""
+        lines.append(
+            f"| {r['model']} | {r['controller']} | {r['alpha']:.4f} (pi/{math.pi / r['alpha']:.3g}) | "
+            f"{r['speed_cm_s']:.2f}{tail} | {r['fluid_power']:.3f} | {r['curvature_error']:.4f} |"
+        )
+    return "\n".join(lines)
+
+
 def write_report(path: Path, img: Path, facts: list[dict[str, str]], extras: dict[str, Any]) -> Path:
     """Write the Markdown report (figures are linked relative to it)."""
     land = extras.get("land") or _land_numbers([])
@@ -293,6 +390,8 @@ def write_report(path: Path, img: Path, facts: list[dict[str, str]], extras: dic
         return f"![{caption}]({rel.as_posix()}/{name})\n\n*{caption}*\n"
 
     rows = "\n".join(f"| {f['finding']} | **{f['verdict']}** | {f['numbers']} |" for f in facts)
+    headline = extras.get("headline")
+    headline = headline_table(headline) if headline else "(not computed in this run)"
     cmp_ = extras["comparison_errors"]
     timings = "\n".join(
         f"| {k} | {v['cells']} | {v['cpu']:.0f} | {v['computed']} | {v['seconds']:.0f} |"
@@ -315,6 +414,21 @@ Verdicts count comparisons between neighbouring grid cells: **yes** when at leas
 way the thesis states, **partly** from 50 %, **no** below. Cells whose body self-intersected
 (the amplitude is near the geometric limit and the soft body over-bends) are excluded and
 marked "fail" in the heatmaps.
+
+## The sources' headline case
+
+The actual-curvature PID with gains (10, 1, 5) and the open loop at omega = 2 pi/3 rad/s, each
+starting at rest on its gait (curvatures and rest curvatures equal to the desired ones at
+t = 0, no start noise: the env keyword `start_on_gait`, `soft-snake evaluate --start-on-gait`),
+default stiffness (E = 1.875e6 Pa). Speed (the centre of mass's displacement over the window,
+whatever its direction, per time: started on the gait, the body does not swim exactly along its
+initial chord), fluid power and mean curvature error `|kappa_des - kappa|` are averaged over {extras.get("headline_window", "the steady state")}.
+"default" is the package's physics; "thesis preset" is `preset="thesis"`, the sources'
+setting (no material damping, Kelasidi added mass), whose closed-loop results depend on the
+integration step. Computed by `soft-snake reproduce --headline-only` (which prints this table
+alone, in about half a minute).
+
+{headline}
 
 ## Findings
 
@@ -431,6 +545,8 @@ def reproduce(out: str | Path = "docs", workers: int | None = None, progress: bo
         }
     extras = make_all_figures(img)
     extras["sweeps"] = sweeps
+    extras["headline"] = headline_case()
+    extras["headline_window"] = headline_window()
     extras["grid"] = (
         f"alpha {grid.n_alpha} values up to 0.95 x the self-intersection limit, omega {grid.n_omega} "
         f"values in [{grid.omega_min}, {grid.omega_max:.3f}] rad/s, E_bend {list(grid.e_bend)} Pa, "
@@ -447,6 +563,12 @@ def _reproduce_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="docs", help="folder of thesis_reproduction.md; figures go to <out>/img")
     p.add_argument("--workers", type=int, help="processes (default: all local cores)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    p.add_argument(
+        "--headline-only",
+        action="store_true",
+        help="only compute and print the sources' headline case (PID and open loop at the "
+        "thesis gait, default physics and thesis preset); writes no files",
+    )
     _grid_arguments(p)
 
 
@@ -456,6 +578,10 @@ def _reproduce_arguments(p: argparse.ArgumentParser) -> None:
 def _reproduce(args: argparse.Namespace) -> int:
     from soft_snake_gym.sweep import grid_from_args
 
+    if args.headline_only:
+        print(f"Averaged over {headline_window()}:")
+        print(headline_table(headline_case()))
+        return 0
     path = reproduce(args.out, workers=args.workers, progress=not args.no_progress, grid=grid_from_args(args))
     print(f"wrote {path}")
     return 0

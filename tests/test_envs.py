@@ -484,8 +484,92 @@ def test_physics_keywords_reach_the_simulator():
 def test_docstring_argument_table_lists_every_keyword(cls, settings):
     table = cls.__doc__.split("## Arguments")[1].split("## Version History")[0]
     documented = set(re.findall(r"^\s*\| `(\w+)`", table, flags=re.M))
-    keywords = {f.name for f in dataclasses.fields(settings)} | {"config", "render_mode"}
+    keywords = {f.name for f in dataclasses.fields(settings)} | {"config", "render_mode", "preset"}
     assert documented == keywords
     for section in ("Description", "Action Space", "Observation Space", "Rewards", "Starting State",
                     "Episode End", "Arguments", "Version History"):
         assert f"## {section}" in cls.__doc__
+
+
+# --- presets and the start on the gait --------------------------------------------------------
+@pytest.mark.parametrize("env_id", IDS)
+def test_preset_sets_the_physics_and_explicit_keywords_override_it(env_id, tmp_path):
+    from soft_snake_gym.physics import kernels as K
+
+    env = gym.make(env_id, preset="thesis", rod={"E_bend": 1e5}).unwrapped
+    cfg = env.sim.config
+    assert cfg.rod.damping_bend == 0.0 and cfg.rod.damping_stretch == 0.0 and cfg.rod.E_bend == 1e5
+    assert cfg.fluid.added_mass == "kelasidi"
+    assert env.sim._prm[K.P_DBEND] == 0.0 and env.sim._prm[K.P_DSTRETCH] == 0.0
+    assert env.sim._prm[K.P_ADDED_MASS] == K.ADDED_MASS_KELASIDI
+    env = gym.make(env_id, preset="thesis", rod={"damping_bend": 0.7}, fluid={"added_mass": "consistent"}).unwrapped
+    assert env.sim.config.rod.damping_bend == 0.7 and env.sim._prm[K.P_DBEND] == 0.7
+    assert env.sim.config.rod.damping_stretch == 0.0
+    assert env.sim._prm[K.P_ADDED_MASS] == K.ADDED_MASS_CONSISTENT
+    # a config file may name the preset; its own keys and explicit keywords win over it
+    path = tmp_path / "cfg.yaml"
+    path.write_text("preset: thesis\nrod: {damping_stretch: 3.0}\n")
+    env = gym.make(env_id, config=path, rod={"damping_stretch": 4.0, "damping_bend": 0.5}).unwrapped
+    assert env.sim.config.rod.damping_stretch == 4.0 and env.sim.config.rod.damping_bend == 0.5
+    assert env.sim.config.fluid.added_mass == "kelasidi"
+    with pytest.raises(ConfigError, match=f"keywords of {env_id}: preset = 'thesiss' is unknown.*available presets: .*thesis"):
+        gym.make(env_id, preset="thesiss")
+
+
+def test_batched_env_takes_the_preset_and_the_start_on_gait():
+    from soft_snake_gym.envs import SwimVectorEnv
+
+    venv = SwimVectorEnv(num_envs=2, preset="thesis", start_on_gait={"alpha": 0.8, "psi0": 1.0})
+    assert all(sim.config.fluid.added_mass == "kelasidi" for sim in venv.batch.sims)
+    obs, _ = venv.reset(seed=[0, 1])
+    kappa_des = serpenoid(serpenoid_phase(0.0, 8, 0.0, math.pi / 4, 1.0), 0.0, 0.8)[0]
+    np.testing.assert_allclose(obs[:, :8], np.tile(kappa_des, (2, 1)), rtol=1e-6, atol=1e-6)
+    np.testing.assert_array_equal(obs[:, 8:16], 0.0)  # at rest: no curvature rate
+    venv.close()
+
+
+def test_start_on_gait_is_at_rest_with_the_desired_curvatures_and_no_noise():
+    from soft_snake_gym.policies import CurvaturePID
+
+    gait = {"alpha": math.pi / 3, "omega": 2.5, "delta": 0.7, "gamma": 0.1, "psi0": 0.4}
+    env = gym.make("SoftEel-v0", start_on_gait=gait, reset_noise_scale=0.05)
+    u = env.unwrapped
+    kappa_des = serpenoid(serpenoid_phase(0.0, 8, 2.5, 0.7, 0.4), 2.5, math.pi / 3, 0.1)[0]
+    bodies = []
+    for seed in (0, 1):
+        obs, _ = env.reset(seed=seed)
+        np.testing.assert_allclose(u.sim.kappa, kappa_des, rtol=0, atol=1e-12)  # measured
+        np.testing.assert_array_equal(u.sim.kbar, kappa_des)  # rest shape on the gait too
+        np.testing.assert_array_equal(u.sim.v, 0.0)
+        np.testing.assert_allclose(u.sim.com, 0.0, atol=1e-12)
+        bodies.append(u.sim.x)
+    np.testing.assert_array_equal(bodies[0], bodies[1])  # no seeded noise
+    # the same gait's controller sees no error at its first step
+    pid = CurvaturePID(env, **gait)
+    pid.predict(obs)
+    assert pid.last_error.max() < 1e-6
+    # missing fields take the thesis gait (alpha = pi/6, delta = 2 pi/(N-2), psi0 = 0)
+    env = gym.make("SoftEel-v0", start_on_gait={})
+    env.reset(seed=0)
+    np.testing.assert_allclose(env.unwrapped.sim.kappa,
+                               serpenoid(serpenoid_phase(0.0, 8, 0.0, math.pi / 4), 0.0, math.pi / 6)[0],
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("env_id", "kwargs", "message"),
+    [
+        ("SoftEel-v0", {"start_on_gait": {"alpha": -0.1}}, r"alpha = -0.1 rad must be in \[0, pi\)"),
+        ("SoftEel-v0", {"start_on_gait": {"psi0": float("nan")}}, "start_on_gait.psi0 = nan must be a finite number"),
+        ("SoftEel-v0", {"start_on_gait": {"omga": 2.0}}, "did you mean 'omega'"),
+        ("SoftEel-v0", {"start_on_gait": True}, "start_on_gait must be a mapping"),
+        ("SoftEel-v0", {"start_on_gait": {"alpha": 1.6}}, r"self-intersecting body at t = 0.*keep alpha below 1.59"),
+        ("SoftEel-v0", {"start_on_gait": {"alpha": 1.2}, "max_rest_curvature": 1.0},
+         "beyond max_rest_curvature = 1.0"),
+        ("SoftEel-v0", {"start_on_gait": {}, "initial_shape": "serpenoid"}, "both set the start; use one"),
+        ("SoftWorm-v0", {"start_on_gait": {}}, "unknown key 'start_on_gait'"),
+    ],
+)
+def test_start_on_gait_bad_values_are_explained(env_id, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        gym.make(env_id, **kwargs)

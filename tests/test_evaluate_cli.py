@@ -130,6 +130,20 @@ def test_evaluate_a_trained_model_and_reject_it_on_the_other_env(capsys, tmp_pat
         (["SoftEel-v0", "--policy", "models/missing.zip"], "'models/missing.zip' does not exist"),
         (["SoftEel-v0", "--policy", "pid", "--episodes", "0"], "must be at least 1"),
         (["SoftEel-v0", "--policy", "pid", "--video", "x.avi"], "must end in .mp4 or .gif"),
+        (
+            ["SoftEel-v0", "--policy", "inching", "--start-on-gait"],
+            "policy 'inching' has no serpenoid gait to start on",
+        ),
+        (["SoftEel-v0", "--policy", "zoo:ppo", "--start-on-gait"], "--env-kwarg start_on_gait.alpha"),
+        (
+            ["SoftEel-v0", "--policy", "pid", "--start-on-gait", "--env-kwarg", "start_on_gait.alpha=1"],
+            "drop --env-kwarg start_on_gait",
+        ),
+        (
+            ["SoftEel-v0", "--policy", "pid:alpha=-1", "--start-on-gait"],
+            "alpha = -1.0 rad must be in [0, pi)",
+        ),
+        (["SoftEel-v0", "--policy", "pid", "--env-kwarg", "preset=nope"], "preset = 'nope' is unknown"),
     ],
 )
 def test_bad_options_are_one_line_errors(capsys, argv, message):
@@ -156,3 +170,50 @@ def test_subcommands_are_registered_in_one_place():
     assert {"evaluate", "sweep", "figures"} <= set(SUBCOMMANDS)
     help_text = build_parser().format_help()
     assert all(name in help_text for name in SUBCOMMANDS)
+
+
+def test_evaluate_start_on_gait_takes_the_gait_from_the_policy(capsys, tmp_path):
+    """From rest on the policy's gait the PID's curvature error at t = 0 is zero; from the
+    straight start it is the gait's own size (|kappa_des| up to 2 tan(pi/6) = 1.15)."""
+    errors = {}
+    for start in (True, False):
+        path = tmp_path / f"{start}.json"
+        argv = [
+            "evaluate",
+            "SoftEel-v0",
+            "--policy",
+            "pid:alpha=pi/3,psi0=0.5",
+            "--episodes",
+            "1",
+            "--max-steps",
+            "1",
+            "--transient",
+            "0",
+            "--json",
+            str(path),
+        ]
+        code, out, err = run(capsys, *argv, *(["--start-on-gait"] if start else []))
+        assert code == 0, err
+        errors[start] = json.loads(path.read_text())["episodes"][0]["curvature_error"]
+    assert errors[True] < 1e-6 and errors[False] > 0.3
+
+
+def test_policy_gait_reads_the_spec_and_the_policy_config():
+    import math
+
+    from soft_snake_gym.config import ConfigError
+    from soft_snake_gym.policies import policy_gait
+
+    root = __import__("pathlib").Path(__file__).resolve().parents[1]
+    gait = policy_gait("pid:alpha=pi/3", config=root / "configs/pid.yaml")
+    assert gait == {
+        "alpha": math.pi / 3,
+        "omega": 2 * math.pi / 3,
+        "delta": math.pi / 4,
+        "gamma": 0.0,
+        "psi0": 0.0,
+    }
+    assert policy_gait("decentralized:omega=3,closure=pacemaker")["omega"] == 3.0
+    assert policy_gait("open-loop")["delta"] is None  # the env resolves 2 pi / (N - 2)
+    with pytest.raises(ConfigError, match="unknown key 'alph'"):
+        policy_gait("open-loop:alph=1")

@@ -88,3 +88,65 @@ def test_scientific_notation_without_a_dot_reads_as_a_float(tmp_path):
     path.write_text("rod:\n  E_bend: 1.87e4\n  E: 2e6\n")
     cfg = load_sim_config(path)
     assert cfg.rod.E_bend == 1.87e4 and cfg.rod.E == 2e6
+
+
+# --- presets ----------------------------------------------------------------------------------
+def test_thesis_preset_is_the_sources_setting_and_overrides_win_field_by_field(tmp_path):
+    from soft_snake_gym.config import load_preset, presets, with_preset
+
+    assert "thesis" in presets()
+    thesis = load_preset("thesis")  # set explicitly, whatever the package defaults become
+    assert thesis["rod"]["damping_bend"] == 0.0 and thesis["rod"]["damping_stretch"] == 0.0
+    assert thesis["fluid"]["added_mass"] == "kelasidi"
+    merged = with_preset({"preset": "thesis", "rod": {"damping_bend": 2.5, "E_bend": 1e5}, "medium": "ground"})
+    assert "preset" not in merged and merged["medium"] == "ground"
+    assert merged["rod"] == {"damping_bend": 2.5, "damping_stretch": 0.0, "E_bend": 1e5}
+    assert merged["fluid"] == {"added_mass": "kelasidi"}
+    # a whole dataclass given explicitly replaces the preset's section
+    assert with_preset({"preset": "thesis", "fluid": Fluid(rho=1025.0)})["fluid"] == Fluid(rho=1025.0)
+    assert with_preset({"preset": None, "rod": {"N": 12}}) == {"rod": {"N": 12}}
+    # the SimConfig loader takes a preset key too
+    path = tmp_path / "thesis_soft.yaml"
+    path.write_text("preset: thesis\nrod:\n  E_bend: 1.87e4\n")
+    cfg = load_sim_config(path)
+    assert cfg.rod == Rod(E_bend=1.87e4, damping_bend=0.0, damping_stretch=0.0)
+    assert cfg.fluid == Fluid(added_mass="kelasidi")
+
+
+def test_shipped_presets_hold_only_valid_simulator_sections():
+    from soft_snake_gym.config import PRESET_SECTIONS, load_preset, presets
+
+    for name in presets():
+        data = load_preset(name)
+        assert set(data) <= set(PRESET_SECTIONS)
+        from_dict(SimConfig, data)  # every value is valid
+
+
+@pytest.mark.parametrize(
+    ("name", "message"),
+    [("thesiss", r"preset = 'thesiss' is unknown \(did you mean 'thesis'\?\); available presets: .*thesis"),
+     ("nope", r"preset = 'nope' is unknown; available presets: .*thesis"),
+     (3, r"preset = 3 is unknown; available presets")],
+)
+def test_unknown_preset_lists_the_available_ones(tmp_path, name, message):
+    from soft_snake_gym.config import with_preset
+
+    with pytest.raises(ConfigError, match=message):
+        with_preset({"preset": name})
+    path = tmp_path / "bad.yaml"
+    path.write_text(f"preset: {name}\n")
+    with pytest.raises(ConfigError, match="bad.yaml: " + message):
+        load_sim_config(path)
+
+
+def test_presets_are_shipped_as_package_data():
+    import fnmatch
+
+    tomllib = pytest.importorskip("tomllib")
+    root = CONFIGS.parent
+    globs = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    files = sorted((root / "soft_snake_gym" / "configs" / "presets").glob("*.yaml"))
+    assert files
+    for f in files:
+        rel = f.relative_to(root / "soft_snake_gym").as_posix()
+        assert any(fnmatch.fnmatch(rel, g) for g in globs["soft_snake_gym"]), rel

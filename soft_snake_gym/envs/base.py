@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 
-from soft_snake_gym.config import ConfigError, from_dict, load_yaml
+from soft_snake_gym.config import ConfigError, from_dict, load_yaml, with_preset
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.task import G
 from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig
@@ -156,10 +156,14 @@ class BaseSettings:
 
 def resolve_settings(settings_cls: type, medium: str, config: str | Path | None, kwargs: dict,
                      label: str | None = None) -> Any:
-    """Settings from a YAML file of constructor keywords overridden by explicit keywords.
+    """Settings from a named preset, a YAML file of constructor keywords and explicit
+    keywords, each overriding the one before.
 
     A ``medium`` key in the file (as in ``configs/eel.yaml``) is accepted if it names this
-    environment's medium. Unknown keys are rejected with the closest valid name.
+    environment's medium. A ``preset`` key (in the file or the keywords) lays that preset's
+    simulator sections beneath the rest, field by field
+    (:func:`soft_snake_gym.config.with_preset`). Unknown keys are rejected with the closest
+    valid name.
     """
     data: dict[str, Any] = {}
     where = f"the keywords of {label}" if label else settings_cls.__name__
@@ -175,7 +179,7 @@ def resolve_settings(settings_cls: type, medium: str, config: str | Path | None,
     data.update(kwargs)
     if config is not None and kwargs:
         where = f"{where} with keyword overrides"
-    return from_dict(settings_cls, data, where=where)
+    return from_dict(settings_cls, with_preset(data, where), where=where)
 
 
 def _display_available() -> bool:

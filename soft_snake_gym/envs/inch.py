@@ -111,12 +111,16 @@ class InchEnv(SoftRobotEnv):
     ```python
     env = gym.make("SoftWorm-v0", max_length_rate=0.4, ground={"mu_s": 0.9, "mu_d": 0.6})
     env = gym.make("SoftWorm-v0", config="configs/softworm.yaml")
+    env = gym.make("SoftWorm-v0", preset="thesis")  # the sources' physics
     ```
+
+    Keywords given explicitly override those from ``config``, which override the ``preset``.
 
     | Parameter             | Type              | Default        | Description                                                                 |
     |-----------------------|-------------------|----------------|-----------------------------------------------------------------------------|
     | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: ground` key is accepted)        |
     | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
+    | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass), whose closed-loop results depend on the step (MODEL.md §5a) |
     | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9)                                                      |
     | `fluid`               | dict or `Fluid`   | `Fluid()`      | unused on the ground                                                        |
     | `ground`              | dict or `Ground`  | `Ground()`     | friction: mu_s, mu_d, V_tol, g                                              |

@@ -11,7 +11,9 @@ from gymnasium.spaces import Box
 
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number
-from soft_snake_gym.gaits import serpenoid, serpenoid_phase
+from soft_snake_gym.gaits import _polyline_crosses, max_serpenoid_amplitude, serpenoid, serpenoid_phase
+from soft_snake_gym.physics import body_from_curvature
+from soft_snake_gym.policies.open_loop import SerpenoidParams
 
 __all__ = ["SwimEnv", "SwimSettings"]
 
@@ -25,6 +27,7 @@ class SwimSettings(BaseSettings):
     initial_shape: Literal["straight", "serpenoid"] = "straight"
     serpenoid_alpha: float = math.pi / 4
     serpenoid_delta: float | None = None
+    start_on_gait: SerpenoidParams | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -39,6 +42,20 @@ class SwimSettings(BaseSettings):
             raise ValueError(
                 f"SwimSettings.initial_shape = {self.initial_shape!r}; use 'straight' or 'serpenoid'"
             )
+        gait = self.start_on_gait
+        if gait is not None:
+            if not isinstance(gait, SerpenoidParams):
+                raise ValueError(
+                    f"SwimSettings.start_on_gait = {gait!r} must be a mapping of serpenoid gait "
+                    "parameters (alpha, omega, delta, gamma, psi0) or None"
+                )
+            for name in ("alpha", "omega", "gamma", "psi0") + (("delta",) if gait.delta is not None else ()):
+                _check_number("SwimSettings", f"start_on_gait.{name}", getattr(gait, name))
+            if self.initial_shape != "straight":
+                raise ValueError(
+                    f"SwimSettings.start_on_gait and initial_shape = {self.initial_shape!r} both set "
+                    "the start; use one (start_on_gait starts exactly on the gait, without noise)"
+                )
 
 
 class SwimEnv(SoftRobotEnv):
@@ -95,7 +112,13 @@ class SwimEnv(SoftRobotEnv):
     starts along +x whatever ``goal_direction``: another goal makes a steering task.
     ``initial_shape="serpenoid"``: the same around the serpenoid body ``kbar_j = 2 tan(alpha
     sin(delta j) / 2)`` (``serpenoid_alpha``, ``serpenoid_delta``; the clock phase at t = 0),
-    its rest shape equal to that serpenoid. ``reset(options={"x", "v", "kbar", "lbar"})`` sets
+    its rest shape equal to that serpenoid. ``start_on_gait={"alpha": ..., "omega": ...,
+    "delta": ..., "gamma": ..., "psi0": ...}`` (the fields of the baselines' serpenoid gait,
+    :class:`~soft_snake_gym.policies.open_loop.SerpenoidParams`; missing ones take its defaults,
+    the thesis gait): at rest on that gait, the sources' start (MODEL.md §7): curvatures and
+    rest curvatures equal to ``kappa_des`` at t = 0 (``psi_j = delta j + psi0``; ``omega`` does
+    not change the shape at rest), chord along +x, centre of mass at the origin, with **no**
+    noise (``reset_noise_scale`` is not used). ``reset(options={"x", "v", "kbar", "lbar"})`` sets
     the initial body exactly (missing parts: at rest, straight rest shape, ``x`` built from
     ``kbar`` and ``lbar``); ``options={"goal_direction": angle}`` sets the episode's goal.
     With ``randomize``, the physics is drawn anew at each reset, the values in
@@ -125,14 +148,16 @@ class SwimEnv(SoftRobotEnv):
     import soft_snake_gym
     env = gym.make("SoftEel-v0", max_curvature_rate=3.0, fluid={"rho": 1025.0})
     env = gym.make("SoftEel-v0", config="configs/softeel.yaml")  # any keywords from YAML
+    env = gym.make("SoftEel-v0", preset="thesis", start_on_gait={"alpha": math.pi / 3})
     ```
-    Keywords given explicitly override those from ``config``; unknown keys are rejected with
-    the closest valid name.
+    Keywords given explicitly override those from ``config``, which override the ``preset``;
+    unknown keys are rejected with the closest valid name.
 
     | Parameter             | Type              | Default        | Description                                                                 |
     |-----------------------|-------------------|----------------|-----------------------------------------------------------------------------|
     | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: water` key is accepted)         |
     | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
+    | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass), whose closed-loop results depend on the step (MODEL.md §5a) |
     | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9): N, edge length and mass, a, b, E, damping_bend, damping_stretch |
     | `fluid`               | dict or `Fluid`   | `Fluid()`      | water: rho, C_f, C_D, C_A                                                   |
     | `ground`              | dict or `Ground`  | `Ground()`     | unused in water; kept so one YAML file can describe both settings           |
@@ -148,6 +173,7 @@ class SwimEnv(SoftRobotEnv):
     | `initial_shape`       | str               | `"straight"`   | `"straight"` or `"serpenoid"`                                               |
     | `serpenoid_alpha`     | float             | `pi/4`         | amplitude (rad) of the serpenoid initial body                               |
     | `serpenoid_delta`     | float or None     | `None`         | phase offset (rad) between nodes; `None`: `2 pi/(N-2)` (pi/4 for N = 10)    |
+    | `start_on_gait`       | dict or None      | `None`         | start at rest on this serpenoid gait (alpha, omega, delta, gamma, psi0), no noise; see Starting State |
     | `goal_direction`      | float             | `0.0`          | goal direction (rad from +x)                                                |
     | `max_observed_speed`  | float             | `2.0`          | bound of `com_velocity_body` (m/s)                                          |
     | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping_bend, damping_stretch, rho, C_f, C_D, C_A, mu_s, mu_d |
@@ -180,6 +206,29 @@ class SwimEnv(SoftRobotEnv):
                     f"{np.abs(self._kbar_initial).max():.3f}, beyond max_rest_curvature = "
                     f"{self.max_rest_curvature!r}; lower the amplitude or raise the bound"
                 )
+        self._on_gait = s.start_on_gait is not None
+        if self._on_gait:
+            self._kbar_initial = self._gait_start_curvature(s.start_on_gait)
+
+    def _gait_start_curvature(self, gait: SerpenoidParams) -> np.ndarray:
+        """``kappa_des`` of ``gait`` at t = 0, (N-2,), checked against the env's bounds."""
+        n = self.N - 2
+        delta = 2.0 * math.pi / n if gait.delta is None else gait.delta
+        kappa = serpenoid(serpenoid_phase(0.0, n, gait.omega, delta, gait.psi0), gait.omega, gait.alpha,
+                          gait.gamma)[0]
+        if np.abs(kappa).max() > self.max_rest_curvature:
+            raise ValueError(
+                f"start_on_gait = {gait!r} has curvatures up to {np.abs(kappa).max():.3f} at t = 0, "
+                f"beyond max_rest_curvature = {self.max_rest_curvature!r}; lower alpha or gamma or "
+                "raise the bound"
+            )
+        if _polyline_crosses(body_from_curvature(kappa, np.ones(n + 1))):
+            limit = max_serpenoid_amplitude(self.N, delta, gait.gamma)
+            raise ValueError(
+                f"start_on_gait alpha = {gait.alpha!r} makes a self-intersecting body at t = 0 "
+                f"(delta = {delta:.4g}, N = {self.N}); keep alpha below {limit:.3f} rad"
+            )
+        return kappa
 
     def _build_spaces(self) -> None:
         s = self.settings
@@ -203,6 +252,9 @@ class SwimEnv(SoftRobotEnv):
 
     def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
         lbar = np.full(self.N - 1, self.base_config.rod.edge_length)
+        if self._on_gait:  # exactly on the gait, at rest, no noise
+            x = body_from_curvature(self._kbar_initial, lbar)
+            return {"x": x, "v": np.zeros_like(x), "kbar": self._kbar_initial.copy(), "lbar": lbar}
         return self._noisy_straight_body(rng, self._kbar_initial, lbar, length_noise=False)
 
     def _check_options(self, body: dict[str, np.ndarray]) -> None:

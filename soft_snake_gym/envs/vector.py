@@ -77,8 +77,9 @@ class SoftVectorEnv(VectorEnv):
         autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default) or ``AutoresetMode.SAME_STEP``.
         render_mode: only ``None``; render a single env to watch a robot.
         config: a YAML file of env keywords, as for the single env.
-        **kwargs: the single env's keywords (``rod``, ``fluid``, ``randomize``...), the same for
-            every robot (physics randomization draws differ per robot).
+        **kwargs: the single env's keywords (``preset``, ``rod``, ``fluid``, ``randomize``,
+            ``start_on_gait``...), the same for every robot (physics randomization draws differ
+            per robot).
     """
 
     env_id = ""

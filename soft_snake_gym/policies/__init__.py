@@ -6,11 +6,12 @@ path to a saved Stable-Baselines3 model loads that model instead.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 from pathlib import Path
 from typing import Any
 
-from soft_snake_gym.config import ConfigError, load_yaml
+from soft_snake_gym.config import ConfigError, from_dict, load_yaml
 from soft_snake_gym.policies.base import (
     BaselinePolicy,
     EnvLayout,
@@ -21,7 +22,7 @@ from soft_snake_gym.policies.base import (
 )
 from soft_snake_gym.policies.decentralized import DecentralizedPhasePID
 from soft_snake_gym.policies.inching import InchingPID, InchingWave
-from soft_snake_gym.policies.open_loop import OpenLoopSerpenoid
+from soft_snake_gym.policies.open_loop import OpenLoopSerpenoid, SerpenoidParams
 from soft_snake_gym.policies.pid import CurvaturePID
 
 __all__ = [
@@ -38,6 +39,7 @@ __all__ = [
     "load_model",
     "make_policy",
     "parse_policy_spec",
+    "policy_gait",
 ]
 
 #: Baseline names accepted by :func:`make_policy` and ``soft-snake evaluate --policy``.
@@ -143,3 +145,33 @@ def make_policy(spec: str, env: Any, config: str | Path | None = None) -> Any:
     if config is not None:
         params = {**load_yaml(config), **params}
     return cls(env, **params)
+
+
+def policy_gait(spec: str, config: str | Path | None = None) -> dict[str, Any]:
+    """The serpenoid gait of a bending baseline, as the env keyword ``start_on_gait`` takes it.
+
+    Args:
+        spec: a baseline spec as for :func:`make_policy` (``"pid:alpha=pi/3"``).
+        config: optional YAML file of the policy's parameters; options in ``spec`` win.
+
+    Returns:
+        ``{"alpha", "omega", "delta", "gamma", "psi0"}`` of that policy (its defaults filled in,
+        validated by its own parameter class).
+
+    Raises:
+        ConfigError: the spec is not a serpenoid baseline (open-loop, pid, decentralized), or
+            its parameters are invalid.
+    """
+    cls = BASELINES.get(spec.partition(":")[0].strip())
+    serpenoid = [n for n, c in BASELINES.items() if issubclass(c.Params, SerpenoidParams)]
+    if cls is None or not issubclass(cls.Params, SerpenoidParams):
+        raise ConfigError(
+            f"policy {spec!r} has no serpenoid gait to start on; starting on the gait takes it from "
+            f"one of {', '.join(serpenoid)}. For another policy, give the env the gait itself: "
+            "start_on_gait={'alpha': ...} (on the command line --env-kwarg start_on_gait.alpha=pi/6)"
+        )
+    name, params = parse_policy_spec(spec)
+    if config is not None:
+        params = {**load_yaml(config), **params}
+    p = from_dict(cls.Params, params, where=f"{name} policy")
+    return {f.name: getattr(p, f.name) for f in dataclasses.fields(SerpenoidParams)}
