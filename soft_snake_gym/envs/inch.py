@@ -148,7 +148,7 @@ class InchEnv(SoftRobotEnv):
 
     def _setup_task(self) -> None:
         s = self.settings
-        self.max_length_rate = float(s.max_length_rate)
+        self.max_length_rate = float(s.max_length_rate) * self.base_config.rod.edge_ratio
         l0 = self.base_config.rod.edge_length
         self.lbar_limits = (s.rest_length_limits[0] * l0, s.rest_length_limits[1] * l0)
 
@@ -161,11 +161,11 @@ class InchEnv(SoftRobotEnv):
             "edge_lengths": m, "edge_length_rates": m, "lbar": m, "stuck": self.N, "com_velocity_body": 2,
         }
         low = np.concatenate([
-            np.zeros(m), np.full(m, -10.0 * s.max_length_rate), np.full(m, lo), np.zeros(self.N),
+            np.zeros(m), np.full(m, -10.0 * self.max_length_rate), np.full(m, lo), np.zeros(self.N),
             np.full(2, -s.max_observed_speed),
         ]).astype(np.float32)
         high = np.concatenate([
-            np.full(m, 2.0 * hi), np.full(m, 10.0 * s.max_length_rate), np.full(m, hi), np.ones(self.N),
+            np.full(m, 2.0 * hi), np.full(m, 10.0 * self.max_length_rate), np.full(m, hi), np.ones(self.N),
             np.full(2, s.max_observed_speed),
         ]).astype(np.float32)
         self.observation_space = Box(low, high, dtype=np.float32)

@@ -11,7 +11,7 @@ from gymnasium.spaces import Box
 
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number
-from soft_snake_gym.gaits import serpenoid, serpenoid_phase
+from soft_snake_gym.gaits import serpenoid, serpenoid_on_nodes, serpenoid_phase
 
 __all__ = ["SwimEnv", "SwimSettings"]
 
@@ -166,14 +166,15 @@ class SwimEnv(SoftRobotEnv):
 
     def _setup_task(self) -> None:
         s = self.settings
-        self.max_curvature_rate = float(s.max_curvature_rate)
-        self.max_rest_curvature = float(s.max_rest_curvature)
+        rod = self.base_config.rod
+        self.max_curvature_rate = float(s.max_curvature_rate) * rod.edge_ratio
+        self.max_rest_curvature = float(s.max_rest_curvature) * rod.edge_ratio
         n = self.N - 2
-        delta = 2.0 * math.pi / n if s.serpenoid_delta is None else s.serpenoid_delta
+        alpha, delta, _ = serpenoid_on_nodes(s.serpenoid_alpha, s.serpenoid_delta, self.N, rod.design_nodes)
         self._kbar_initial = np.zeros(n)
         if s.initial_shape == "serpenoid":
             psi = serpenoid_phase(0.0, n, 0.0, delta)
-            self._kbar_initial = serpenoid(psi, 0.0, s.serpenoid_alpha)[0]
+            self._kbar_initial = serpenoid(psi, 0.0, alpha)[0]
             if np.abs(self._kbar_initial).max() > self.max_rest_curvature:
                 raise ValueError(
                     f"serpenoid_alpha = {s.serpenoid_alpha!r} gives rest curvatures up to "
@@ -188,9 +189,9 @@ class SwimEnv(SoftRobotEnv):
             "kappa": n, "kappa_dot": n, "kbar": n, "com_velocity_body": 2, "goal_direction_body": 2,
         }
         high = np.concatenate([
-            np.full(n, 2.0 * s.max_rest_curvature),
-            np.full(n, 4.0 * s.max_curvature_rate),
-            np.full(n, s.max_rest_curvature),
+            np.full(n, 2.0 * self.max_rest_curvature),
+            np.full(n, 4.0 * self.max_curvature_rate),
+            np.full(n, self.max_rest_curvature),
             np.full(2, s.max_observed_speed),
             np.ones(2),
         ]).astype(np.float32)
