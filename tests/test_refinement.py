@@ -19,7 +19,7 @@ import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym import Rod, SimConfig, Simulator, body_from_curvature
 from soft_snake_gym.config import ConfigError, from_dict, load_sim_config
 from soft_snake_gym.gaits import serpenoid_on_nodes
-from soft_snake_gym.policies import CurvaturePID, OpenLoopSerpenoid
+from soft_snake_gym.policies import CurvaturePID, InchingWave, OpenLoopSerpenoid
 
 
 def test_refined_rod_is_the_same_robot_with_shorter_edges():
@@ -83,6 +83,27 @@ def test_gait_mapping_is_the_identity_on_the_design_robot_and_scales_with_the_ed
     # same wave on arc length: amplitude per metre and wavelength in metres
     assert alpha / l == pytest.approx((math.pi / 6) / l_d) and gamma / l == pytest.approx(0.2 / l_d)
     assert 2 * math.pi * l / delta == pytest.approx(8 * l_d)
+
+
+def test_controllers_command_the_same_wave_on_arc_length():
+    """At equal arc length s and time t, the refined robot's controllers ask for the same
+    turning angle per metre (serpenoid) and the same strain (length wave) as the design's."""
+    t = np.array([0.37, 1.9])
+    phi = {}
+    for N in (10, 19):
+        env = gym.make("SoftEel-v0", rod={"refine": N})
+        pid = CurvaturePID(env, alpha=0.5, delta=0.7, gamma=0.05)
+        kappa_des, _ = pid.desired(pid.clock_phase(t))
+        phi[N] = 2 * np.arctan(kappa_des / 2) / env.unwrapped.sim.config.rod.edge_length
+    np.testing.assert_allclose(phi[19][:, 1::2], phi[10], rtol=1e-12)  # node 2k of 19 is node k of 10
+    strain = {}
+    for N in (10, 19):
+        env = gym.make("SoftWorm-v0", rod={"refine": N})
+        wave = InchingWave(env, delta_l=0.9, l0=0.2)
+        strain[N] = wave.desired(t)[0] / env.unwrapped.sim.config.rod.edge_length
+    np.testing.assert_allclose(
+        strain[19][:, ::2], strain[10], rtol=1e-12
+    )  # edge 2k of 19 starts at edge k of 10
 
 
 def test_refined_serpenoid_start_is_the_same_body():
