@@ -59,7 +59,9 @@ class InchEnv(SoftRobotEnv):
     ``lbar`` outside ``rest_length_limits`` (fractions of the edge length) is cut so that
     ``lbar`` stops at the bound. The default ``max_length_rate = 0.3`` m/s covers the inching
     wave's peak rate ``0.5 l0 eps omega = 0.17`` m/s at eps = 0.3, omega = 2 pi, with room
-    for feedback.
+    for feedback. On a refined rod (``rod={"refine": N}``) ``max_length_rate`` (as given,
+    that of the robot as designed) is scaled by ``Rod.edge_ratio = l / l_d``: the same strain
+    rate at action 1.0 whatever N.
 
     ## Observation Space
     A `Box(low, high, (4N-1,), float32)` in this order (``observation_structure``); values
@@ -117,12 +119,12 @@ class InchEnv(SoftRobotEnv):
     |-----------------------|-------------------|----------------|-----------------------------------------------------------------------------|
     | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: ground` key is accepted)        |
     | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
-    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9)                                                      |
+    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9); `refine`: the same robot with that many nodes       |
     | `fluid`               | dict or `Fluid`   | `Fluid()`      | unused on the ground                                                        |
     | `ground`              | dict or `Ground`  | `Ground()`     | friction: mu_s, mu_d, V_tol, g                                              |
     | `integrator`          | dict or `Integrator` | `Integrator()` | backward Euler at h = 0.01 s by default                                  |
     | `dt`                  | float or None     | `None`         | control step (s), a multiple of `integrator.h`; `None`: `integrator.h`      |
-    | `max_length_rate`     | float             | `0.3`          | length rate (m/s) of action 1.0                                             |
+    | `max_length_rate`     | float             | `0.3`          | length rate (m/s) of action 1.0 (per edge of the robot as designed)         |
     | `rest_length_limits`  | [float, float]    | `[0.5, 1.5]`   | bounds of `lbar` as fractions of the edge length                            |
     | `energy_source`       | str               | `"friction"`   | `"friction"` or `"actuator"`: the power charged by *reward_energy*          |
     | `forward_reward_weight` | float           | `10.0`         | weight of *reward_forward* (per m/s)                                        |

@@ -62,7 +62,11 @@ class SwimEnv(SoftRobotEnv):
     that would carry ``kbar`` past ``±max_rest_curvature`` is cut so that ``kbar`` stops at the
     bound. The default ``max_curvature_rate = 2 pi`` 1/s covers the PID baseline's saturation
     ``1.5 alpha omega`` for every gait with ``alpha omega <= 4.19`` (e.g. alpha = pi/4 up to
-    omega = 5.3 rad/s).
+    omega = 5.3 rad/s). On a refined rod (``rod={"refine": N}``, ``Rod.refined``) the
+    per-node bounds ``max_curvature_rate`` and ``max_rest_curvature`` (as given, those of the
+    robot as designed) are scaled by ``Rod.edge_ratio = l / l_d`` (``env.unwrapped`` holds the
+    scaled values): a per-node turning angle is the curvature times the edge length, so action
+    1.0 bends the body at the same rate per metre whatever N.
 
     ## Observation Space
     A `Box(low, high, (3(N-2)+4,), float32)`, what the robot's own sensors measure, in this order
@@ -95,9 +99,11 @@ class SwimEnv(SoftRobotEnv):
     starts along +x whatever ``goal_direction``: another goal makes a steering task.
     ``initial_shape="serpenoid"``: the same around the serpenoid body ``kbar_j = 2 tan(alpha
     sin(delta j) / 2)`` (``serpenoid_alpha``, ``serpenoid_delta``; the clock phase at t = 0),
-    its rest shape equal to that serpenoid. ``reset(options={"x", "v", "kbar", "lbar"})`` sets
-    the initial body exactly (missing parts: at rest, straight rest shape, ``x`` built from
-    ``kbar`` and ``lbar``); ``options={"goal_direction": angle}`` sets the episode's goal.
+    its rest shape equal to that serpenoid (on a refined rod the same body: ``serpenoid_alpha``
+    and ``serpenoid_delta`` are mapped onto arc length, ``gaits.serpenoid_on_nodes``).
+    ``reset(options={"x", "v", "kbar", "lbar"})`` sets the initial body exactly (missing
+    parts: at rest, straight rest shape, ``x`` built from ``kbar`` and ``lbar``);
+    ``options={"goal_direction": angle}`` sets the episode's goal.
     With ``randomize``, the physics is drawn anew at each reset, the values in
     ``info["randomized"]``.
 
@@ -133,12 +139,12 @@ class SwimEnv(SoftRobotEnv):
     |-----------------------|-------------------|----------------|-----------------------------------------------------------------------------|
     | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: water` key is accepted)         |
     | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
-    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9): N, edge length and mass, a, b, E, damping_bend, damping_stretch |
+    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9): N, edge length and mass, a, b, E, damping_bend, damping_stretch; `refine`: the same robot with that many nodes (`Rod.refined`) |
     | `fluid`               | dict or `Fluid`   | `Fluid()`      | water: rho, C_f, C_D, C_A                                                   |
     | `ground`              | dict or `Ground`  | `Ground()`     | unused in water; kept so one YAML file can describe both settings           |
     | `integrator`          | dict or `Integrator` | `Integrator()` | backward Euler at h = 0.01 s by default (MODEL.md §5a)                   |
     | `dt`                  | float or None     | `None`         | control step (s), a multiple of `integrator.h`; `None`: `integrator.h`      |
-    | `max_curvature_rate`  | float             | `2 pi`         | curvature rate (1/s) of action 1.0                                          |
+    | `max_curvature_rate`  | float             | `2 pi`         | curvature rate (1/s) of action 1.0 (per node of the robot as designed)      |
     | `max_rest_curvature`  | float             | `4.0`          | bound on `|kbar|` (turning angle 127°)                                      |
     | `forward_reward_weight` | float           | `1.0`          | weight of *reward_forward* (per m/s)                                        |
     | `energy_cost_weight`  | float             | `1e-3`         | weight of *reward_energy* (per W)                                           |
