@@ -6,14 +6,41 @@ All functions are plain numpy on arrays, so policies and tests share them.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ["serpenoid_phase", "serpenoid", "length_wave", "pulse_wave", "max_serpenoid_amplitude"]
+__all__ = ["serpenoid_phase", "serpenoid", "serpenoid_on_nodes", "length_wave", "pulse_wave", "max_serpenoid_amplitude"]
 
 
 def serpenoid_phase(t: float, n_interior: int, omega: float, delta: float, psi0: float = 0.0) -> np.ndarray:
     """Centralized clock ``psi_j = omega t + delta j + psi0`` for interior nodes j = 1..N-2."""
     return omega * t + delta * np.arange(1, n_interior + 1) + psi0
+
+
+def serpenoid_on_nodes(
+    alpha: float, delta: float | None, n_nodes: int, design_nodes: int | None = None, gamma: float = 0.0
+) -> tuple[float, float, float]:
+    """Per-node amplitude, phase offset and bias of a serpenoid on a (possibly refined) rod.
+
+    ``alpha``, ``delta`` and ``gamma`` are given per node of the robot as designed,
+    ``design_nodes`` nodes with edges of length ``l_d`` (``Rod.refined_from``; None:
+    ``n_nodes``, no refinement), and ``delta = None`` is one wave along its interior,
+    ``2 pi / (design_nodes - 2)`` (MODEL.md §6). They describe a continuous body wave on arc
+    length ``s``: turning angle per unit length ``(alpha sin(omega t + 2 pi s / lambda +
+    psi0) + gamma) / l_d`` with wavelength ``lambda = 2 pi l_d / delta``. On a rod of
+    ``n_nodes`` nodes with the same length, edges of ``l = l_d (design_nodes - 1) / (n_nodes -
+    1)`` and interior node j at ``s_j = j l``, that wave is the per-node amplitude
+    ``alpha l / l_d``, phase offset ``delta l / l_d`` and bias ``gamma l / l_d``. For an
+    unrefined rod they are returned unchanged, bit for bit.
+
+    Returns:
+        (alpha_node, delta_node, gamma_node) [rad].
+    """
+    design = n_nodes if design_nodes is None else design_nodes
+    ratio = (design - 1) / (n_nodes - 1)  # l / l_d, exactly 1.0 without refinement
+    delta = 2 * math.pi / (design - 2) if delta is None else delta
+    return alpha * ratio, delta * ratio, gamma * ratio
 
 
 def serpenoid(psi: np.ndarray, psi_dot: float | np.ndarray, alpha: float, gamma: float = 0.0

@@ -7,6 +7,7 @@ fails at construction time instead of as a NaN a thousand steps later.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import InitVar, dataclass, fields
 from typing import Literal
@@ -49,6 +50,17 @@ def _check_int(owner: object, name: str, lo: int, hi: int | None = None) -> None
 class Rod:
     """The soft body: N nodes, N-1 edges of elliptic cross-section (MODEL.md §3, §9).
 
+    ``N`` alone adds or removes edges of the same length and mass: ``Rod(N=300)`` is a 54 m
+    eel. To model the *same* robot (length, mass, cross-section, material) with more nodes,
+    refine it: ``Rod().refined(40)``, or the key ``refine`` (``rod={"refine": 40}`` in an env
+    or a YAML file), which applies to the robot the other keys describe. Refining to N nodes
+    keeps the length ``L`` and mass ``M``: ``edge_length = L/(N-1)``, ``edge_mass = M/(N-1)``;
+    it scales both dampings by ``l_old/l_new`` (like ``EI/lvor`` and ``EA/l``, so that the
+    dissipation per unit length of a given body motion does not depend on N), and it records
+    in ``refined_from`` the node count of the robot as designed, on which the gaits' per-node
+    amplitude and phase offset are given (``soft_snake_gym.gaits.serpenoid_on_nodes`` maps
+    them onto arc length; the envs scale their per-node action bounds by ``edge_ratio``).
+
     Attributes:
         N: number of nodes (>= 3); the head is node N-1.
         edge_length: rest length of every edge at rest, ``lbar`` at t = 0 [m].
@@ -62,8 +74,12 @@ class Rod:
             ``-damping_bend * kappa_dot`` at each interior node [N m s] (MODEL.md §3).
         damping_stretch: Kelvin-Voigt damping of stretching: a force ``-damping_stretch`` times
             the stretch rate along each edge [N s/m] (MODEL.md §3).
+        refined_from: node count of the robot this rod refines (the robot as designed, whose
+            per-node gait parameters apply); None: the rod is not a refinement.
         damping: removed; passing it raises an error naming ``damping_bend`` and
             ``damping_stretch``, which replace it.
+        refine: construction only: build the same robot with this many nodes (>= 3), as
+            described above; the stored fields are those of the refined rod.
     """
 
     N: int = 10
@@ -76,9 +92,11 @@ class Rod:
     E_bend: float | None = None
     damping_bend: float = 0.0
     damping_stretch: float = 0.0
+    refined_from: int | None = None
     damping: InitVar[float | None] = None
+    refine: InitVar[int | None] = None
 
-    def __post_init__(self, damping: float | None) -> None:
+    def __post_init__(self, damping: float | None, refine: int | None) -> None:
         if damping is not None:
             raise ValueError(
                 f"Rod.damping = {damping!r} is no longer a parameter: it was split into "
@@ -97,6 +115,41 @@ class Rod:
             _check(self, "E_bend", 0.0, None, lo_open=True)
         _check(self, "damping_bend", 0.0, None)
         _check(self, "damping_stretch", 0.0, None)
+        if self.refined_from is not None:
+            _check_int(self, "refined_from", 3, 100_000)
+        if refine is not None:
+            if isinstance(refine, bool) or not isinstance(refine, int) or not 3 <= refine <= 100_000:
+                raise ValueError(
+                    f"Rod.refine = {refine!r} must be an integer in [3, 100000]: the number of "
+                    "nodes of the same robot (same length and mass) to build"
+                )
+            factor = (self.N - 1) / (refine - 1)  # l_new / l_old
+            design = self.N if self.refined_from is None else self.refined_from
+            for name, value in (
+                ("N", refine),
+                ("edge_length", self.edge_length * factor),
+                ("edge_mass", self.edge_mass * factor),
+                ("damping_bend", self.damping_bend / factor),
+                ("damping_stretch", self.damping_stretch / factor),
+                ("refined_from", None if design == refine else design),
+            ):
+                object.__setattr__(self, name, value)
+
+    def refined(self, N: int) -> Rod:  # noqa: N803 - MODEL.md's name
+        """The same robot (length, mass, cross-section, material) with ``N`` nodes; see the
+        class docstring. ``Rod().refined(10) == Rod()``."""
+        return dataclasses.replace(self, refine=N)
+
+    @property
+    def design_nodes(self) -> int:
+        """Node count of the robot as designed: ``refined_from``, or N if not refined."""
+        return self.N if self.refined_from is None else self.refined_from
+
+    @property
+    def edge_ratio(self) -> float:
+        """``l / l_design``: this rod's edge length over that of the robot as designed
+        (exactly 1.0 for a rod that is not a refinement) [-]."""
+        return (self.design_nodes - 1) / (self.N - 1)
 
     @property
     def area(self) -> float:

@@ -59,7 +59,9 @@ class InchEnv(SoftRobotEnv):
     ``lbar`` outside ``rest_length_limits`` (fractions of the edge length) is cut so that
     ``lbar`` stops at the bound. The default ``max_length_rate = 0.3`` m/s covers the inching
     wave's peak rate ``0.5 l0 eps omega = 0.17`` m/s at eps = 0.3, omega = 2 pi, with room
-    for feedback.
+    for feedback. On a refined rod (``rod={"refine": N}``) ``max_length_rate`` (as given,
+    that of the robot as designed) is scaled by ``Rod.edge_ratio = l / l_d``: the same strain
+    rate at action 1.0 whatever N.
 
     ## Observation Space
     A `Box(low, high, (4N-1,), float32)` in this order (``observation_structure``); values
@@ -121,12 +123,12 @@ class InchEnv(SoftRobotEnv):
     | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: ground` key is accepted)        |
     | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
     | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass), whose closed-loop results depend on the step (MODEL.md §5a) |
-    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9)                                                      |
+    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9); `refine`: the same robot with that many nodes       |
     | `fluid`               | dict or `Fluid`   | `Fluid()`      | unused on the ground                                                        |
     | `ground`              | dict or `Ground`  | `Ground()`     | friction: mu_s, mu_d, V_tol, g                                              |
     | `integrator`          | dict or `Integrator` | `Integrator()` | backward Euler at h = 0.01 s by default                                  |
     | `dt`                  | float or None     | `None`         | control step (s), a multiple of `integrator.h`; `None`: `integrator.h`      |
-    | `max_length_rate`     | float             | `0.3`          | length rate (m/s) of action 1.0                                             |
+    | `max_length_rate`     | float             | `0.3`          | length rate (m/s) of action 1.0 (per edge of the robot as designed)         |
     | `rest_length_limits`  | [float, float]    | `[0.5, 1.5]`   | bounds of `lbar` as fractions of the edge length                            |
     | `energy_source`       | str               | `"friction"`   | `"friction"` or `"actuator"`: the power charged by *reward_energy*          |
     | `forward_reward_weight` | float           | `10.0`         | weight of *reward_forward* (per m/s)                                        |
@@ -152,7 +154,7 @@ class InchEnv(SoftRobotEnv):
 
     def _setup_task(self) -> None:
         s = self.settings
-        self.max_length_rate = float(s.max_length_rate)
+        self.max_length_rate = float(s.max_length_rate) * self.base_config.rod.edge_ratio
         l0 = self.base_config.rod.edge_length
         self.lbar_limits = (s.rest_length_limits[0] * l0, s.rest_length_limits[1] * l0)
 
@@ -165,11 +167,11 @@ class InchEnv(SoftRobotEnv):
             "edge_lengths": m, "edge_length_rates": m, "lbar": m, "stuck": self.N, "com_velocity_body": 2,
         }
         low = np.concatenate([
-            np.zeros(m), np.full(m, -10.0 * s.max_length_rate), np.full(m, lo), np.zeros(self.N),
+            np.zeros(m), np.full(m, -10.0 * self.max_length_rate), np.full(m, lo), np.zeros(self.N),
             np.full(2, -s.max_observed_speed),
         ]).astype(np.float32)
         high = np.concatenate([
-            np.full(m, 2.0 * hi), np.full(m, 10.0 * s.max_length_rate), np.full(m, hi), np.ones(self.N),
+            np.full(m, 2.0 * hi), np.full(m, 10.0 * self.max_length_rate), np.full(m, hi), np.ones(self.N),
             np.full(2, s.max_observed_speed),
         ]).astype(np.float32)
         self.observation_space = Box(low, high, dtype=np.float32)

@@ -11,7 +11,13 @@ from gymnasium.spaces import Box
 
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number
-from soft_snake_gym.gaits import _polyline_crosses, max_serpenoid_amplitude, serpenoid, serpenoid_phase
+from soft_snake_gym.gaits import (
+    _polyline_crosses,
+    max_serpenoid_amplitude,
+    serpenoid,
+    serpenoid_on_nodes,
+    serpenoid_phase,
+)
 from soft_snake_gym.physics import body_from_curvature
 from soft_snake_gym.policies.open_loop import SerpenoidParams
 
@@ -79,7 +85,11 @@ class SwimEnv(SoftRobotEnv):
     that would carry ``kbar`` past ``±max_rest_curvature`` is cut so that ``kbar`` stops at the
     bound. The default ``max_curvature_rate = 2 pi`` 1/s covers the PID baseline's saturation
     ``1.5 alpha omega`` for every gait with ``alpha omega <= 4.19`` (e.g. alpha = pi/4 up to
-    omega = 5.3 rad/s).
+    omega = 5.3 rad/s). On a refined rod (``rod={"refine": N}``, ``Rod.refined``) the
+    per-node bounds ``max_curvature_rate`` and ``max_rest_curvature`` (as given, those of the
+    robot as designed) are scaled by ``Rod.edge_ratio = l / l_d`` (``env.unwrapped`` holds the
+    scaled values): a per-node turning angle is the curvature times the edge length, so action
+    1.0 bends the body at the same rate per metre whatever N.
 
     ## Observation Space
     A `Box(low, high, (3(N-2)+4,), float32)`, what the robot's own sensors measure, in this order
@@ -112,7 +122,8 @@ class SwimEnv(SoftRobotEnv):
     starts along +x whatever ``goal_direction``: another goal makes a steering task.
     ``initial_shape="serpenoid"``: the same around the serpenoid body ``kbar_j = 2 tan(alpha
     sin(delta j) / 2)`` (``serpenoid_alpha``, ``serpenoid_delta``; the clock phase at t = 0),
-    its rest shape equal to that serpenoid. ``start_on_gait={"alpha": ..., "omega": ...,
+    its rest shape equal to that serpenoid (on a refined rod the same body: ``serpenoid_alpha``
+    and ``serpenoid_delta`` are mapped onto arc length, ``gaits.serpenoid_on_nodes``). ``start_on_gait={"alpha": ..., "omega": ...,
     "delta": ..., "gamma": ..., "psi0": ...}`` (the fields of the baselines' serpenoid gait,
     :class:`~soft_snake_gym.policies.open_loop.SerpenoidParams`; missing ones take its defaults,
     the thesis gait): at rest on that gait, the sources' start (MODEL.md §7): curvatures and
@@ -158,12 +169,12 @@ class SwimEnv(SoftRobotEnv):
     | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: water` key is accepted)         |
     | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
     | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass), whose closed-loop results depend on the step (MODEL.md §5a) |
-    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9): N, edge length and mass, a, b, E, damping_bend, damping_stretch |
+    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9): N, edge length and mass, a, b, E, damping_bend, damping_stretch; `refine`: the same robot with that many nodes (`Rod.refined`) |
     | `fluid`               | dict or `Fluid`   | `Fluid()`      | water: rho, C_f, C_D, C_A                                                   |
     | `ground`              | dict or `Ground`  | `Ground()`     | unused in water; kept so one YAML file can describe both settings           |
     | `integrator`          | dict or `Integrator` | `Integrator()` | backward Euler at h = 0.01 s by default (MODEL.md §5a)                   |
     | `dt`                  | float or None     | `None`         | control step (s), a multiple of `integrator.h`; `None`: `integrator.h`      |
-    | `max_curvature_rate`  | float             | `2 pi`         | curvature rate (1/s) of action 1.0                                          |
+    | `max_curvature_rate`  | float             | `2 pi`         | curvature rate (1/s) of action 1.0 (per node of the robot as designed)      |
     | `max_rest_curvature`  | float             | `4.0`          | bound on `|kbar|` (turning angle 127°)                                      |
     | `forward_reward_weight` | float           | `1.0`          | weight of *reward_forward* (per m/s)                                        |
     | `energy_cost_weight`  | float             | `1e-3`         | weight of *reward_energy* (per W)                                           |
@@ -192,14 +203,15 @@ class SwimEnv(SoftRobotEnv):
 
     def _setup_task(self) -> None:
         s = self.settings
-        self.max_curvature_rate = float(s.max_curvature_rate)
-        self.max_rest_curvature = float(s.max_rest_curvature)
+        rod = self.base_config.rod
+        self.max_curvature_rate = float(s.max_curvature_rate) * rod.edge_ratio
+        self.max_rest_curvature = float(s.max_rest_curvature) * rod.edge_ratio
         n = self.N - 2
-        delta = 2.0 * math.pi / n if s.serpenoid_delta is None else s.serpenoid_delta
+        alpha, delta, _ = serpenoid_on_nodes(s.serpenoid_alpha, s.serpenoid_delta, self.N, rod.design_nodes)
         self._kbar_initial = np.zeros(n)
         if s.initial_shape == "serpenoid":
             psi = serpenoid_phase(0.0, n, 0.0, delta)
-            self._kbar_initial = serpenoid(psi, 0.0, s.serpenoid_alpha)[0]
+            self._kbar_initial = serpenoid(psi, 0.0, alpha)[0]
             if np.abs(self._kbar_initial).max() > self.max_rest_curvature:
                 raise ValueError(
                     f"serpenoid_alpha = {s.serpenoid_alpha!r} gives rest curvatures up to "
@@ -213,9 +225,9 @@ class SwimEnv(SoftRobotEnv):
     def _gait_start_curvature(self, gait: SerpenoidParams) -> np.ndarray:
         """``kappa_des`` of ``gait`` at t = 0, (N-2,), checked against the env's bounds."""
         n = self.N - 2
-        delta = 2.0 * math.pi / n if gait.delta is None else gait.delta
-        kappa = serpenoid(serpenoid_phase(0.0, n, gait.omega, delta, gait.psi0), gait.omega, gait.alpha,
-                          gait.gamma)[0]
+        rod = self.base_config.rod
+        alpha, delta, gamma = serpenoid_on_nodes(gait.alpha, gait.delta, self.N, rod.design_nodes, gait.gamma)
+        kappa = serpenoid(serpenoid_phase(0.0, n, gait.omega, delta, gait.psi0), gait.omega, alpha, gamma)[0]
         if np.abs(kappa).max() > self.max_rest_curvature:
             raise ValueError(
                 f"start_on_gait = {gait!r} has curvatures up to {np.abs(kappa).max():.3f} at t = 0, "
@@ -223,7 +235,7 @@ class SwimEnv(SoftRobotEnv):
                 "raise the bound"
             )
         if _polyline_crosses(body_from_curvature(kappa, np.ones(n + 1))):
-            limit = max_serpenoid_amplitude(self.N, delta, gait.gamma)
+            limit = max_serpenoid_amplitude(self.N, delta, gamma)
             raise ValueError(
                 f"start_on_gait alpha = {gait.alpha!r} makes a self-intersecting body at t = 0 "
                 f"(delta = {delta:.4g}, N = {self.N}); keep alpha below {limit:.3f} rad"
@@ -237,9 +249,9 @@ class SwimEnv(SoftRobotEnv):
             "kappa": n, "kappa_dot": n, "kbar": n, "com_velocity_body": 2, "goal_direction_body": 2,
         }
         high = np.concatenate([
-            np.full(n, 2.0 * s.max_rest_curvature),
-            np.full(n, 4.0 * s.max_curvature_rate),
-            np.full(n, s.max_rest_curvature),
+            np.full(n, 2.0 * self.max_rest_curvature),
+            np.full(n, 4.0 * self.max_curvature_rate),
+            np.full(n, self.max_rest_curvature),
             np.full(2, s.max_observed_speed),
             np.ones(2),
         ]).astype(np.float32)

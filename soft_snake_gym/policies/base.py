@@ -42,6 +42,8 @@ class EnvLayout:
         action_scale: physical rate of action 1.0 ([1/s] or [m/s]).
         n_nodes: number of nodes N.
         edge_length: rest edge length at t = 0 [m].
+        design_nodes: node count of the robot as designed (``Rod.design_nodes``): N, or the
+            ``refined_from`` of a refined rod, on whose nodes the gait parameters are given.
     """
 
     env_id: str
@@ -51,6 +53,7 @@ class EnvLayout:
     action_scale: float
     n_nodes: int
     edge_length: float
+    design_nodes: int
 
 
 def _unwrap_one(env: Any) -> Any:
@@ -99,6 +102,7 @@ def env_layout(env: Any) -> EnvLayout:
         action_scale=scale,
         n_nodes=int(sim.N),
         edge_length=float(sim.config.rod.edge_length),
+        design_nodes=int(sim.config.rod.design_nodes),
     )
 
 

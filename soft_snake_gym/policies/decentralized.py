@@ -76,6 +76,6 @@ class DecentralizedPhasePID(_SerpenoidPolicy):
         else:
             psi[:, -1] = self.clock_phase(t)[:, -1]
         kappa_des, kappa_dot_des = self.desired(psi)
-        u = pid_law(p, self.layout.dt, kappa, kappa_dot, kappa_des, kappa_dot_des, state[:, 1:])
+        u = pid_law(self.gait, self.layout.dt, kappa, kappa_dot, kappa_des, kappa_dot_des, state[:, 1:])
         state[:, 0] = t + self.layout.dt
         return u, np.abs(kappa_des - kappa)

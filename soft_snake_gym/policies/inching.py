@@ -39,7 +39,8 @@ class InchingParams:
     Attributes:
         eps: fraction of compression, in (0, 1) (0.3).
         omega: temporal frequency [rad/s] (2 pi).
-        delta_l: phase offset between neighbouring edges [rad]; None: 2 pi / (N - 1).
+        delta_l: phase offset between neighbouring edges [rad]; None: 2 pi / (N - 1), one
+            wave along the body whatever N.
         direction: +1 the wave travels tail to head (moves the worm toward the head), -1 the
             reverse.
         l0: uncompressed edge length [m]; None: the env's rest edge length.
@@ -54,6 +55,10 @@ class InchingParams:
             (None: :data:`PULSE_DUTY`). The pulse's peak rate is ``0.5 l0 eps omega / duty``
             (0.17 m/s / duty at the defaults); above the env's ``max_length_rate`` (0.3 m/s)
             the env clips it, and the policy warns.
+
+    On a refined rod (``Rod.refined``), a given ``delta_l`` or ``l0`` is that of the robot as
+    designed, and each edge runs ``delta_l l / l_d`` and ``l0 l / l_d``: the same wave on arc
+    length (``eps`` and the gains [1/s] need no mapping).
     """
 
     eps: float = 0.3
@@ -121,8 +126,9 @@ class InchingWave(BaselinePolicy):
     def _setup(self) -> None:
         self.n_outputs = self.layout.n_nodes - 1
         p = self.params
-        self.delta_l = 2 * math.pi / self.n_outputs if p.delta_l is None else p.delta_l
-        self.l0 = self.layout.edge_length if p.l0 is None else p.l0
+        ratio = (self.layout.design_nodes - 1) / self.n_outputs  # l / l_d
+        self.delta_l = 2 * math.pi / self.n_outputs if p.delta_l is None else p.delta_l * ratio
+        self.l0 = self.layout.edge_length if p.l0 is None else p.l0 * ratio
         self.duty = (PULSE_DUTY if p.duty is None else p.duty) if p.wave == "pulse" else 1.0
         self.state_size = 1
         peak = 0.5 * self.l0 * p.eps * p.omega / self.duty

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from soft_snake_gym.gaits import serpenoid, serpenoid_phase
+from soft_snake_gym.gaits import serpenoid, serpenoid_on_nodes, serpenoid_phase
 from soft_snake_gym.policies.base import BaselinePolicy
 
 __all__ = ["OpenLoopParams", "OpenLoopSerpenoid", "SerpenoidParams"]
@@ -24,6 +25,15 @@ class SerpenoidParams:
             wave along the body (pi/4 for N = 10).
         gamma: turning bias [rad] (0).
         psi0: phase of the clock at t = 0 [rad] (0).
+
+    On a refined rod (``Rod.refined``), ``alpha``, ``delta`` and ``gamma`` are those of the
+    robot as designed and are mapped onto arc length: each node runs ``alpha l / l_d``,
+    ``delta l / l_d`` and ``gamma l / l_d`` (``soft_snake_gym.gaits.serpenoid_on_nodes``), so
+    that the body wave is the same whatever N. The controllers' gains need no scaling: every
+    term of their laws is a per-node turning angle (or its rate or integral), the continuous
+    curvature times the edge length, so the law divided by ``l`` is the same law on
+    curvatures per unit length with the same gains [1/s]; the saturation
+    ``1.5 alpha omega`` follows the mapped ``alpha``.
     """
 
     alpha: float = math.pi / 6
@@ -48,19 +58,24 @@ class _SerpenoidPolicy(BaselinePolicy):
     suggestion = "use 'inching' or 'inching-pid' on SoftWorm-v0"
 
     def _setup(self) -> None:
-        self.n_outputs = self.layout.n_nodes - 2
+        layout = self.layout
+        self.n_outputs = layout.n_nodes - 2
         p = self.params
-        self.delta = 2 * math.pi / self.n_outputs if p.delta is None else p.delta
+        alpha, self.delta, gamma = serpenoid_on_nodes(
+            p.alpha, p.delta, layout.n_nodes, layout.design_nodes, p.gamma
+        )
+        #: the parameters as each node runs them (alpha, delta, gamma mapped onto arc length).
+        self.gait = dataclasses.replace(p, alpha=alpha, delta=self.delta, gamma=gamma)
         self.state_size = 1 + self.n_outputs
 
     def clock_phase(self, t: np.ndarray) -> np.ndarray:
         """Centralized phases ``omega t + delta j + psi0``, (n_envs, N-2) [rad]."""
-        p = self.params
+        p = self.gait
         return serpenoid_phase(0.0, self.n_outputs, 0.0, self.delta, p.psi0)[None, :] + (p.omega * t[:, None])
 
     def desired(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(kappa_des, kappa_dot_des)`` at phases psi advancing at omega."""
-        p = self.params
+        p = self.gait
         return serpenoid(psi, p.omega, p.alpha, p.gamma)
 
 

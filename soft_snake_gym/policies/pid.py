@@ -74,7 +74,7 @@ class CurvaturePID(_SerpenoidPolicy):
         kappa_des, kappa_dot_des = self.desired(self.clock_phase(t))
         integral = state[:, 1:]
         u = pid_law(
-            self.params,
+            self.gait,
             self.layout.dt,
             kappa,
             self.block(obs, "kappa_dot"),
