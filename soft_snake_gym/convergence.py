@@ -22,8 +22,10 @@ the thesis's gaits (tracking errors: 0.2 % of the gait's amplitude):
 
 - ``average_speed`` 1e-3 m/s: 1 % of the eel's 0.13 m/s serpenoid speed, 0.5 % of a body
   length (1.62 m) per 10 s;
-- ``distance`` 1e-3 m: 1 mm over an episode, 0.6 % of an edge (0.18 m) and 1 % of the
-  0.10 m the sinusoidal inching wave moves the worm in 10 s;
+- ``distance`` 1e-2 m: 0.6 % of the body length (1.62 m) and under 1 % of the 1.27 m the
+  default inching pulse moves the worm in 10 s. A gait that anchors nothing (the sinusoidal
+  wave, random actions) moves the worm only by stick-slip chatter, a few millimetres either
+  way, whose value carries no physics; this bound says such a result is zero at every step;
 - ``mean_fluid_power`` 0.05 W: 1 % of the 5.7 W of the PID eel;
 - ``energy_friction`` and ``energy_actuator`` 0.5 J: 1 % of the eel's 61 J and the worm's
   90 J per 10 s episode;
@@ -73,7 +75,7 @@ RELATIVE_TOLERANCE: dict[str, float] = {"water": 0.05, "ground": 0.10}
 #: Absolute tolerance per metric, for values near zero (justified in the module docstring).
 ABSOLUTE_TOLERANCE: dict[str, float] = {
     "average_speed": 1e-3,
-    "distance": 1e-3,
+    "distance": 1e-2,
     "mean_fluid_power": 0.05,
     "energy_friction": 0.5,
     "energy_actuator": 0.5,
