@@ -28,6 +28,7 @@ from soft_snake_gym.envs.task import G
 from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig
 from soft_snake_gym.physics import Simulator, body_from_curvature
 from soft_snake_gym.physics import kernels as K
+from soft_snake_gym.physics.simulator import energy_ledger
 
 __all__ = [
     "G",
@@ -374,6 +375,7 @@ class SoftRobotEnv(gym.Env):
         info.update(zip(T.TERM_KEYS, r[T.R_RF : T.R_RFAIL + 1], strict=True))
         info["failure"] = self._failure
         info["metrics"] = dict(zip(self._metric_keys, r[T.M_AVG :], strict=True))
+        info["energy"] = energy_ledger(self.sim._out.tolist())
         if self.render_mode is not None and ok:
             self._record_trail()
         if self.render_mode == "human":

@@ -33,6 +33,7 @@ from soft_snake_gym.envs.swim import SwimEnv
 from soft_snake_gym.params import SimConfig
 from soft_snake_gym.physics import kernels as K
 from soft_snake_gym.physics.batch import BatchSimulator
+from soft_snake_gym.physics.simulator import energy_ledger
 
 __all__ = ["SoftVectorEnv", "SwimVectorEnv", "InchVectorEnv", "ENV_CLASSES"]
 
@@ -353,6 +354,12 @@ class SoftVectorEnv(VectorEnv):
             for key, value in zip(self._metric_keys, step_rows[5:], strict=True):
                 metrics[key], metrics[f"_{key}"] = value, mask
             infos["metrics"], infos["_metrics"] = metrics, mask
+            energy: dict[str, Any] = {}
+            for key, value in energy_ledger(out.T).items():
+                if not stepped.all():
+                    value[~stepped] = 0.0
+                energy[key], energy[f"_{key}"] = value, mask
+            infos["energy"], infos["_energy"] = energy, mask
         if reset.any():
             randomized: dict[str, Any] = {}
             for i, info in zip(np.flatnonzero(reset), reset_infos, strict=True):

@@ -15,6 +15,7 @@ __all__ = [
     "SimulationError",
     "allocate_arrays",
     "body_from_curvature",
+    "energy_ledger",
     "node_masses",
     "pack_params",
 ]
@@ -130,6 +131,25 @@ def allocate_arrays(N: int, batch: tuple[int, ...] = ()) -> tuple[np.ndarray, ..
         np.zeros(batch + (K.N_IBUF, 2 * N), dtype=np.int64),
         np.zeros(batch + (K.N_OUT,)),
     )
+
+
+def energy_ledger(out) -> dict:
+    """The energy ledger (see :meth:`Simulator.energy_ledger`) from diagnostics ``out``
+    indexed by ``K.O_*``: a list of floats (one robot) or an (``K.N_OUT``, n) array (n robots,
+    entries (n,) arrays, bitwise the same figures)."""
+    work = out[K.O_W_ACT] - out[K.O_L0_W_ACT]
+    terms = {
+        "fluid_dissipation": out[K.O_E_FLUID] - out[K.O_L0_E_FLUID],
+        "damping_dissipation": out[K.O_E_DAMP] - out[K.O_L0_E_DAMP],
+        "friction_dissipation": out[K.O_E_FRICTION] - out[K.O_L0_E_FRICTION],
+        "delta_kinetic": out[K.O_E_KIN] - out[K.O_L0_KIN],
+        "delta_elastic": out[K.O_E_ELASTIC] - out[K.O_L0_ELASTIC],
+        "delta_fluid_kinetic": out[K.O_T_FLUID] - out[K.O_L0_T_FLUID],
+    }
+    error = work
+    for value in terms.values():
+        error = error - value
+    return {"actuator_work": work, **terms, "error": error}
 
 
 def _as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
@@ -249,6 +269,12 @@ class Simulator:
         self._ibuf[K.I_FRICTION] = K.SLIDING
         self._buf[K.B_V0] = self._v  # the stepper's predictor starts from the current velocity
         self.failure = None
+        # the energy ledger starts here: energies now, work and dissipation accumulated so far
+        out = self._out
+        K.ledger_energies(self._q, self._v, self._kbar, self._lbar, self._prm, self._buf, out)
+        out[K.O_L0_KIN : K.O_L0_E_FRICTION + 1] = out[
+            [K.O_E_KIN, K.O_E_ELASTIC, K.O_T_FLUID, K.O_W_ACT, K.O_E_FLUID, K.O_E_DAMP, K.O_E_FRICTION]
+        ]
 
     def set_external_force(self, force=None) -> None:
         """Apply a constant external force to each node, (N, 2) [N]; ``None`` removes it."""
@@ -382,6 +408,26 @@ class Simulator:
         """Kinetic energy of the nodes (not of the entrained water) [J]."""
         return float(0.5 * self._buf[K.B_M] @ (self._v * self._v))
 
+    def fluid_kinetic_energy(self) -> float:
+        """Kinetic energy of the water moved with the body, ``T_f = sum_i 1/2 mu_n (v^i . n^i)^2``
+        (MODEL.md §4; 0 out of water) [J]."""
+        if self.config.medium != "water":
+            return 0.0
+        return float(K.fluid_kinetic_energy(self._q, self._v, self._prm))
+
+    def energy_ledger(self) -> dict[str, float]:
+        """The energy balance since the last :meth:`reset` or :meth:`set_state` (MODEL.md §4):
+        ``actuator_work = fluid_dissipation + damping_dissipation + friction_dissipation +
+        delta_kinetic + delta_elastic + delta_fluid_kinetic + error``, all in J.
+
+        ``delta_*`` are the changes of the body's kinetic energy, its elastic energy and the
+        water's kinetic energy ``T_f``. ``error`` is what the integrator created (> 0) or
+        destroyed (< 0), e.g. backward Euler's numerical damping; it shrinks with the step for
+        the consistent added mass. Work of :meth:`set_external_force` forces is not counted
+        (it shows up in ``error``).
+        """
+        return energy_ledger(self._out.tolist())
+
     def elastic_forces(self) -> np.ndarray:
         """Elastic plus damping forces on the nodes, (N, 2) [N]."""
         F = np.zeros(2 * self.N)
@@ -447,6 +493,17 @@ class Simulator:
         """Actuator energy since reset, the sum over steps of |work| [J] (a real actuator
         does not get back the work the body does on it)."""
         return float(self._out[K.O_E_ACT])
+
+    @property
+    def damping_power(self) -> float:
+        """Power lost to material damping over the last step,
+        ``damping_bend sum kappa_dot^2 + damping_stretch sum ldot^2`` [W]."""
+        return float(self._out[K.O_P_DAMP])
+
+    @property
+    def damping_energy(self) -> float:
+        """Energy lost to material damping since reset [J]."""
+        return float(self._out[K.O_E_DAMP])
 
     @property
     def actuator_work(self) -> float:
