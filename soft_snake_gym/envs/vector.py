@@ -33,7 +33,6 @@ from soft_snake_gym.envs.swim import SwimEnv
 from soft_snake_gym.params import SimConfig
 from soft_snake_gym.physics import kernels as K
 from soft_snake_gym.physics.batch import BatchSimulator
-from soft_snake_gym.physics.simulator import energy_ledger
 
 __all__ = ["SoftVectorEnv", "SwimVectorEnv", "InchVectorEnv", "ENV_CLASSES"]
 
@@ -355,9 +354,10 @@ class SoftVectorEnv(VectorEnv):
                 metrics[key], metrics[f"_{key}"] = value, mask
             infos["metrics"], infos["_metrics"] = metrics, mask
             energy: dict[str, Any] = {}
-            for key, value in energy_ledger(out.T).items():
-                if not stepped.all():
-                    value[~stepped] = 0.0
+            ledger = np.ascontiguousarray(out[:, K.O_LEDGER : K.O_LEDGER + K.N_LEDGER].T)
+            if not stepped.all():
+                ledger[:, ~stepped] = 0.0
+            for key, value in zip(K.LEDGER_KEYS, ledger, strict=True):
                 energy[key], energy[f"_{key}"] = value, mask
             infos["energy"], infos["_energy"] = energy, mask
         if reset.any():

@@ -56,7 +56,11 @@ O_P_DAMP, O_E_DAMP, O_E_KIN, O_E_ELASTIC, O_T_FLUID = range(11, 16)
 # where the ledger starts (written at reset/set_state): those energies and the accumulated work
 # and dissipation at that moment
 O_L0_KIN, O_L0_ELASTIC, O_L0_T_FLUID, O_L0_W_ACT, O_L0_E_FLUID, O_L0_E_DAMP, O_L0_E_FRICTION = range(16, 23)
-N_OUT = 23  # simulated time is O_NSTEPS * h: derived, so it cannot drift
+# the ledger since then, ``out[O_LEDGER : O_LEDGER + 8]`` in the order of LEDGER_KEYS
+O_LEDGER, N_LEDGER = 23, 8
+LEDGER_KEYS = ("actuator_work", "fluid_dissipation", "damping_dissipation", "friction_dissipation",
+               "delta_kinetic", "delta_elastic", "delta_fluid_kinetic", "error")
+N_OUT = 31  # simulated time is O_NSTEPS * h: derived, so it cannot drift
 
 # --- status codes ----------------------------------------------------------------------------
 OK, NOT_CONVERGED, NON_FINITE, SELF_INTERSECTION, RUNAWAY_STRETCH, BAD_REST_LENGTH = range(6)
@@ -800,7 +804,8 @@ def _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
 @njit(cache=True, error_model="numpy")
 def ledger_energies(q, v, kbar, lbar, prm, buf, out):
     """Write the body's kinetic and elastic energy and the water's ``T_f`` (0 out of water)
-    into ``out[O_E_KIN]``, ``out[O_E_ELASTIC]``, ``out[O_T_FLUID]`` [J]."""
+    into ``out[O_E_KIN]``, ``out[O_E_ELASTIC]``, ``out[O_T_FLUID]`` [J], and the energy ledger
+    since the start recorded at ``O_L0_*`` into ``out[O_LEDGER:]`` (``LEDGER_KEYS``)."""
     m = buf[B_M]
     ke = 0.0
     for i in range(q.size):
@@ -808,6 +813,17 @@ def ledger_energies(q, v, kbar, lbar, prm, buf, out):
     out[O_E_KIN] = ke
     out[O_E_ELASTIC] = elastic_energy(q, kbar, lbar, prm)
     out[O_T_FLUID] = fluid_kinetic_energy(q, v, prm) if int(prm[P_MEDIUM]) == MEDIUM_WATER else 0.0
+    # the ledger since O_L0_*: actuator work = dissipation + energy changes + error
+    work = out[O_W_ACT] - out[O_L0_W_ACT]
+    error = work
+    for k, (now, start) in enumerate(((O_E_FLUID, O_L0_E_FLUID), (O_E_DAMP, O_L0_E_DAMP),
+                                      (O_E_FRICTION, O_L0_E_FRICTION), (O_E_KIN, O_L0_KIN),
+                                      (O_E_ELASTIC, O_L0_ELASTIC), (O_T_FLUID, O_L0_T_FLUID))):
+        term = out[now] - out[start]
+        out[O_LEDGER + 1 + k] = term
+        error -= term
+    out[O_LEDGER] = work
+    out[O_LEDGER + 7] = error
 
 
 @njit(cache=True, error_model="numpy")

@@ -15,7 +15,6 @@ __all__ = [
     "SimulationError",
     "allocate_arrays",
     "body_from_curvature",
-    "energy_ledger",
     "node_masses",
     "pack_params",
 ]
@@ -131,25 +130,6 @@ def allocate_arrays(N: int, batch: tuple[int, ...] = ()) -> tuple[np.ndarray, ..
         np.zeros(batch + (K.N_IBUF, 2 * N), dtype=np.int64),
         np.zeros(batch + (K.N_OUT,)),
     )
-
-
-def energy_ledger(out) -> dict:
-    """The energy ledger (see :meth:`Simulator.energy_ledger`) from diagnostics ``out``
-    indexed by ``K.O_*``: a list of floats (one robot) or an (``K.N_OUT``, n) array (n robots,
-    entries (n,) arrays, bitwise the same figures)."""
-    work = out[K.O_W_ACT] - out[K.O_L0_W_ACT]
-    terms = {
-        "fluid_dissipation": out[K.O_E_FLUID] - out[K.O_L0_E_FLUID],
-        "damping_dissipation": out[K.O_E_DAMP] - out[K.O_L0_E_DAMP],
-        "friction_dissipation": out[K.O_E_FRICTION] - out[K.O_L0_E_FRICTION],
-        "delta_kinetic": out[K.O_E_KIN] - out[K.O_L0_KIN],
-        "delta_elastic": out[K.O_E_ELASTIC] - out[K.O_L0_ELASTIC],
-        "delta_fluid_kinetic": out[K.O_T_FLUID] - out[K.O_L0_T_FLUID],
-    }
-    error = work
-    for value in terms.values():
-        error = error - value
-    return {"actuator_work": work, **terms, "error": error}
 
 
 def _as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
@@ -275,6 +255,7 @@ class Simulator:
         out[K.O_L0_KIN : K.O_L0_E_FRICTION + 1] = out[
             [K.O_E_KIN, K.O_E_ELASTIC, K.O_T_FLUID, K.O_W_ACT, K.O_E_FLUID, K.O_E_DAMP, K.O_E_FRICTION]
         ]
+        out[K.O_LEDGER : K.O_LEDGER + K.N_LEDGER] = 0.0
 
     def set_external_force(self, force=None) -> None:
         """Apply a constant external force to each node, (N, 2) [N]; ``None`` removes it."""
@@ -426,7 +407,7 @@ class Simulator:
         the consistent added mass. Work of :meth:`set_external_force` forces is not counted
         (it shows up in ``error``).
         """
-        return energy_ledger(self._out.tolist())
+        return dict(zip(K.LEDGER_KEYS, self._out[K.O_LEDGER : K.O_LEDGER + K.N_LEDGER].tolist(), strict=True))
 
     def elastic_forces(self) -> np.ndarray:
         """Elastic plus damping forces on the nodes, (N, 2) [N]."""
