@@ -107,7 +107,9 @@ class InchEnv(SoftRobotEnv):
     ``friction_power``, ``actuator_power`` (signed; W), ``edge_lengths``, ``lbar``, ``stuck``,
     ``newton_iterations``, every ``reward_<term>``, ``failure`` and ``metrics`` (running episode
     summary: ``average_speed``, ``distance``, ``displacement``, ``duration``,
-    ``cost_of_transport``, ``energy_friction``, ``energy_actuator``, ``actuator_work``).
+    ``cost_of_transport``, ``energy_friction``, ``energy_actuator``, ``actuator_work``) and
+    ``energy``, the episode's energy ledger (as for ``SoftEel-v0``; here the ground takes
+    ``friction_dissipation``).
 
     ## Arguments
     ```python

@@ -151,7 +151,11 @@ class SwimEnv(SoftRobotEnv):
     ``average_speed`` (distance / duration, m/s), ``distance`` (along the goal, m),
     ``displacement``, ``duration``, ``cost_of_transport`` (actuator energy / (total mass g
     distance); ``inf`` without forward progress), ``energy_fluid``, ``energy_actuator`` (sum of
-    |work| per integrator step, J), ``actuator_work`` (signed, J).
+    |work| per integrator step, J), ``actuator_work`` (signed, J); and ``energy``, the episode's
+    energy ledger (MODEL.md §4, J, see ``Simulator.energy_ledger``): ``actuator_work`` =
+    ``fluid_dissipation`` + ``damping_dissipation`` + ``friction_dissipation`` +
+    ``delta_kinetic`` + ``delta_elastic`` + ``delta_fluid_kinetic`` (the water's kinetic
+    energy ``T_f``) + ``error`` (what the integrator made or lost; it shrinks with the step).
 
     ## Arguments
     ```python

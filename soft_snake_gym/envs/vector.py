@@ -354,6 +354,13 @@ class SoftVectorEnv(VectorEnv):
             for key, value in zip(self._metric_keys, step_rows[5:], strict=True):
                 metrics[key], metrics[f"_{key}"] = value, mask
             infos["metrics"], infos["_metrics"] = metrics, mask
+            energy: dict[str, Any] = {}
+            ledger = np.ascontiguousarray(out[:, K.O_LEDGER : K.O_LEDGER + K.N_LEDGER].T)
+            if not stepped.all():
+                ledger[:, ~stepped] = 0.0
+            for key, value in zip(K.LEDGER_KEYS, ledger, strict=True):
+                energy[key], energy[f"_{key}"] = value, mask
+            infos["energy"], infos["_energy"] = energy, mask
         if reset.any():
             randomized: dict[str, Any] = {}
             for i, info in zip(np.flatnonzero(reset), reset_infos, strict=True):

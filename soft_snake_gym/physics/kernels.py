@@ -43,8 +43,8 @@ MEDIUM_NONE, MEDIUM_WATER, MEDIUM_GROUND = 0, 1, 2
 METHOD_BACKWARD_EULER, METHOD_SYMPLECTIC_EULER = 0, 1
 
 # --- scratch rows ----------------------------------------------------------------------------
-B_R, B_DV, B_F, B_Q0, B_V0, B_VACC, B_M, B_FEXT, B_KEYS, B_A = range(10)
-N_BUF = 10
+B_R, B_DV, B_F, B_Q0, B_V0, B_VACC, B_M, B_FEXT, B_KEYS, B_A, B_P0 = range(11)
+N_BUF = 11
 I_PIV, I_ORDER, I_FRICTION, I_SWITCHES = 0, 1, 2, 3
 N_IBUF = 4
 SLIDING, STUCK = 0, 1
@@ -53,7 +53,17 @@ MAX_SWITCHES = 2  # contact changes per node and step: bounds the active-set pas
 # --- diagnostics -----------------------------------------------------------------------------
 (O_STATUS, O_NITER, O_RESIDUAL, O_P_FLUID, O_P_FRICTION, O_P_ACT, O_E_FLUID, O_E_FRICTION,
  O_E_ACT, O_W_ACT, O_NSTEPS) = range(11)
-N_OUT = 11  # simulated time is O_NSTEPS * h: derived, so it cannot drift
+# energy ledger (MODEL.md §4): damping power of the last step and its accumulated energy, and
+# the body's kinetic and elastic energy and the water's kinetic energy T_f after the last step
+O_P_DAMP, O_E_DAMP, O_E_KIN, O_E_ELASTIC, O_T_FLUID = range(11, 16)
+# where the ledger starts (written at reset/set_state): those energies and the accumulated work
+# and dissipation at that moment
+O_L0_KIN, O_L0_ELASTIC, O_L0_T_FLUID, O_L0_W_ACT, O_L0_E_FLUID, O_L0_E_DAMP, O_L0_E_FRICTION = range(16, 23)
+# the ledger since then, ``out[O_LEDGER : O_LEDGER + 8]`` in the order of LEDGER_KEYS
+O_LEDGER, N_LEDGER = 23, 8
+LEDGER_KEYS = ("actuator_work", "fluid_dissipation", "damping_dissipation", "friction_dissipation",
+               "delta_kinetic", "delta_elastic", "delta_fluid_kinetic", "error")
+N_OUT = 31  # simulated time is O_NSTEPS * h: derived, so it cannot drift
 
 # --- status codes ----------------------------------------------------------------------------
 OK, NOT_CONVERGED, NON_FINITE, SELF_INTERSECTION, RUNAWAY_STRETCH, BAD_REST_LENGTH = range(6)
@@ -337,6 +347,138 @@ def solve_mass(q, prm, m, F, a, J, piv, water):
 
 
 @njit(cache=True, error_model="numpy")
+def fluid_momentum(q, v, prm, R, sp, sg, J, dt, jac):
+    """The water's kinetic energy ``T_f = sum_i 1/2 mu_n (v^i . n^i)^2`` (MODEL.md §4) and its
+    derivatives: adds ``sp P_f + sg G`` to R (2N,), with the water's momentum
+    ``P_f = dT_f/dv`` (half of each edge's ``mu_n v_n n`` to each node) [N s] and
+    ``G = dT_f/dx`` [N]. If ``jac``, adds the Jacobian of ``P_f - dt G`` with respect to the
+    end-of-step velocity (``x = x0 + dt v``) to the band J:
+    ``dP_f/dv + dt (dP_f/dx - dG/dv) - dt^2 dG/dx`` (``M_A``, a skew gyroscopic part and a
+    symmetric curvature part). Returns ``T_f`` [J].
+
+    Per edge, with ``c = rho pi C_A a^2`` (``mu_n = c l``), ``e = x[i+1] - x[i]``:
+    ``dT/de = c (vn^2/2 t - vn vt n)``, ``d(mu_n vn n)/de = c (-vt n n^T + vn (n t^T - t n^T))``,
+    ``d2T/de2 = c/l (vt^2 - vn^2/2) n n^T``.
+    """
+    N = q.size // 2
+    cm = prm[P_RHO] * math.pi * prm[P_CA] * prm[P_A] * prm[P_A]
+    tf = 0.0
+    for i in range(N - 1):
+        ex = q[2 * i + 2] - q[2 * i]
+        ey = q[2 * i + 3] - q[2 * i + 1]
+        l = math.sqrt(ex * ex + ey * ey)
+        tx, ty = ex / l, ey / l
+        nx, ny = -ty, tx
+        vx = 0.5 * (v[2 * i] + v[2 * i + 2])
+        vy = 0.5 * (v[2 * i + 1] + v[2 * i + 3])
+        vt = vx * tx + vy * ty
+        vn = vx * nx + vy * ny
+        tf += 0.5 * cm * l * vn * vn
+        pn = 0.5 * sp * cm * l * vn  # half the edge's momentum to each node
+        gt = sg * cm * 0.5 * vn * vn
+        gn = -sg * cm * vn * vt
+        gx, gy = gt * tx + gn * nx, gt * ty + gn * ny
+        R[2 * i] += pn * nx - gx
+        R[2 * i + 1] += pn * ny - gy
+        R[2 * i + 2] += pn * nx + gx
+        R[2 * i + 3] += pn * ny + gy
+        if jac:
+            a = 0.25 * cm * l
+            # D = d(edge momentum)/de; block (a, b) gets A + dt/2 (s_b D - s_a D^T) - dt^2 s_a s_b H
+            d00 = cm * (-vt * nx * nx + vn * (nx * tx - tx * nx))
+            d01 = cm * (-vt * nx * ny + vn * (nx * ty - tx * ny))
+            d10 = cm * (-vt * ny * nx + vn * (ny * tx - ty * nx))
+            d11 = cm * (-vt * ny * ny + vn * (ny * ty - ty * ny))
+            hc = dt * dt * cm / l * (vt * vt - 0.5 * vn * vn)
+            hd = 0.5 * dt
+            for ia in range(2):
+                sa = 2.0 * ia - 1.0
+                for ib in range(2):
+                    sb = 2.0 * ib - 1.0
+                    h = hc * sa * sb
+                    _add_block(
+                        J, i + ia, i + ib,
+                        a * nx * nx + hd * (sb * d00 - sa * d00) - h * nx * nx,
+                        a * nx * ny + hd * (sb * d01 - sa * d10) - h * nx * ny,
+                        a * ny * nx + hd * (sb * d10 - sa * d01) - h * ny * nx,
+                        a * ny * ny + hd * (sb * d11 - sa * d11) - h * ny * ny,
+                    )
+    return tf
+
+
+@njit(cache=True, error_model="numpy")
+def munk_force(q, v, prm, F):
+    """Adds the velocity part of the consistent added-mass force, ``dT_f/dx - (dP_f/dx) v``
+    (the turning normal's terms, the Munk moment), to F (2N,) [N]. With it,
+    ``(M + M_A) a = F_other + munk`` is the Lagrangian equation of ``T_f`` (MODEL.md §4)."""
+    N = q.size // 2
+    cm = prm[P_RHO] * math.pi * prm[P_CA] * prm[P_A] * prm[P_A]
+    for i in range(N - 1):
+        ex = q[2 * i + 2] - q[2 * i]
+        ey = q[2 * i + 3] - q[2 * i + 1]
+        l = math.sqrt(ex * ex + ey * ey)
+        tx, ty = ex / l, ey / l
+        nx, ny = -ty, tx
+        vx = 0.5 * (v[2 * i] + v[2 * i + 2])
+        vy = 0.5 * (v[2 * i + 1] + v[2 * i + 3])
+        vt = vx * tx + vy * ty
+        vn = vx * nx + vy * ny
+        dx = v[2 * i + 2] - v[2 * i]
+        dy = v[2 * i + 3] - v[2 * i + 1]
+        et = dx * tx + dy * ty
+        en = dx * nx + dy * ny
+        gt = 0.5 * cm * vn * vn
+        gn = -cm * vn * vt
+        # half of D (v[i+1] - v[i]) on each node, D = c (-vt n n^T + vn (n t^T - t n^T))
+        ct = -0.5 * cm * (-vn * en)
+        cn = -0.5 * cm * (-vt * en + vn * et)
+        F[2 * i] += -gt * tx - gn * nx + ct * tx + cn * nx
+        F[2 * i + 1] += -gt * ty - gn * ny + ct * ty + cn * ny
+        F[2 * i + 2] += gt * tx + gn * nx + ct * tx + cn * nx
+        F[2 * i + 3] += gt * ty + gn * ny + ct * ty + cn * ny
+
+
+@njit(cache=True, error_model="numpy")
+def fluid_kinetic_energy(q, v, prm):
+    """``T_f = sum_i 1/2 mu_n (v^i . n^i)^2``, the water's kinetic energy (MODEL.md §4) [J]."""
+    N = q.size // 2
+    cm = prm[P_RHO] * math.pi * prm[P_CA] * prm[P_A] * prm[P_A]
+    tf = 0.0
+    for i in range(N - 1):
+        ex = q[2 * i + 2] - q[2 * i]
+        ey = q[2 * i + 3] - q[2 * i + 1]
+        vx = 0.5 * (v[2 * i] + v[2 * i + 2])
+        vy = 0.5 * (v[2 * i + 1] + v[2 * i + 3])
+        w = vy * ex - vx * ey  # l v_n
+        tf += 0.5 * cm * w * w / math.sqrt(ex * ex + ey * ey)
+    return tf
+
+
+@njit(cache=True, error_model="numpy")
+def damping_power(q, v, prm):
+    """Power lost to material damping, ``damping_bend sum kappa_dot^2 + damping_stretch sum
+    ldot^2`` (MODEL.md §3) [W]."""
+    N = q.size // 2
+    db, ds = prm[P_DBEND], prm[P_DSTRETCH]
+    p = 0.0
+    if ds > 0.0:
+        for k in range(N - 1):
+            ex = q[2 * k + 2] - q[2 * k]
+            ey = q[2 * k + 3] - q[2 * k + 1]
+            ld = (ex * (v[2 * k + 2] - v[2 * k]) + ey * (v[2 * k + 3] - v[2 * k + 1])) / math.sqrt(
+                ex * ex + ey * ey
+            )
+            p += ds * ld * ld
+    if db > 0.0:
+        for j in range(1, N - 1):
+            k, g0x, g0y, g1x, g1y, g2x, g2y = turning(q, j)[:7]
+            kd = (1.0 + 0.25 * k * k) * (g0x * v[2 * j - 2] + g0y * v[2 * j - 1] + g1x * v[2 * j]
+                                         + g1y * v[2 * j + 1] + g2x * v[2 * j + 2] + g2y * v[2 * j + 3])
+            p += db * kd * kd
+    return p
+
+
+@njit(cache=True, error_model="numpy")
 def actuator_power(q, kbar, lbar, u_k, u_l, prm):
     """Power the inputs put into the body, ``dE/dkbar . u_k + dE/dlbar . u_l`` (MODEL.md §3) [W]."""
     N = q.size // 2
@@ -462,8 +604,11 @@ def kinetic_friction(q, v, i, fn, eps2, prm):
 
 @njit(cache=True, error_model="numpy")
 def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
-    """Residual ``R = (M + M_A)(v - v0) - dt F(q0 + dt v, v)`` of backward Euler at the trial
-    velocity ``v`` (also writes ``q``), and if ``jac`` its Jacobian into J. Returns
+    """Residual of backward Euler at the trial velocity ``v`` (also writes ``q = q0 + dt v``),
+    and if ``jac`` its Jacobian into J. In water with the consistent added mass (MODEL.md §4)
+    in momentum form, ``R = M (v - v0) + P_f(q, v) - P_f(q0, v0) - dt (F(q, v) + dT_f/dx(q, v))``
+    (``P_f(q0, v0)`` in ``buf[B_P0]``); with ``added_mass = "kelasidi"``,
+    ``R = (M + M_A(q)) (v - v0) - dt F(q, v)``. Returns
     (squared 2-norm, max-norm of R/m [m/s], fluid power, friction power)."""
     n = q.size
     q0, v0, F, R, m = buf[B_Q0], buf[B_V0], buf[B_F], buf[B_R], buf[B_M]
@@ -483,7 +628,13 @@ def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
         for i in range(n):
             J[i, KL] += m[i]
     if water:
-        added_mass(q, prm, dv, R, J, 1.0, True, jac)
+        if int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
+            fluid_momentum(q, v, prm, R, 1.0, -dt, J, dt, jac)
+            p0 = buf[B_P0]
+            for i in range(n):
+                R[i] -= p0[i]
+        else:
+            added_mass(q, prm, dv, R, J, 1.0, True, jac)
     p_fric = 0.0
     if medium == MEDIUM_GROUND:
         state = ibuf[I_FRICTION]
@@ -518,11 +669,12 @@ def _update_contacts(v, buf, ibuf, prm, dt, n):
     """Make stick-slip consistent with the end of a converged step (MODEL.md §5); True if a
     node changed and the step must be solved again.
 
-    A sliding node that ends slower than ``V_tol`` sticks. Otherwise the stuck node whose
-    holding force ``f = -m v0/dt - F`` (``F``: every other force, at the end of the step) most
-    exceeds ``mu_s F_N`` is released to slide, with a first guess along its push: one at a
-    time, because releasing one node unloads the others. Each node changes at most
-    ``MAX_SWITCHES`` times per step, so the passes end.
+    Sliding nodes that end slower than ``V_tol`` stick. Otherwise every stuck node whose
+    holding force ``f = -m v0/dt - F`` (``F``: every other force, at the end of the step)
+    exceeds ``mu_s F_N`` is released to slide, with a first guess along its push (releasing
+    them one at a time, worst first, gave the same gaits to 1e-4 in more passes). A node
+    released too eagerly ends slow and sticks again in the next pass. Each node changes at
+    most ``MAX_SWITCHES`` times per step, so the passes end.
     """
     F, m, v0 = buf[B_F], buf[B_M], buf[B_V0]
     state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
@@ -588,6 +740,10 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
             v_prev = v0[i]
             v0[i] = v[i]
             v[i] = 2.0 * v[i] - v_prev
+        if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
+            p0 = buf[B_P0]
+            p0[:] = 0.0
+            fluid_momentum(q0, v0, prm, p0, 1.0, 0.0, J, 0.0, False)
     norm2, rmax, p_fluid, p_fric = _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, True)
     it = 0
     pass_it = 0
@@ -629,15 +785,19 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
 @njit(cache=True, error_model="numpy")
 def _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     """One explicit semi-implicit (symplectic) Euler step: kick with F(q, v), then drift.
-    On the ground, friction is decided by the end of the kick (MODEL.md §5): a node whose
-    frictionless end velocity ``w`` could be stopped within ``mu_s F_N`` sticks, any other
-    slides with ``mu_d F_N`` against ``w`` (the lumped mass matrix is diagonal on the ground,
-    so each node is decided on its own). Returns (fluid power, friction power)."""
+    In water ``(M + M_A(q)) a = F``, plus with the consistent added mass the velocity terms of
+    :func:`munk_force`. On the ground, friction is decided by the end of the kick (MODEL.md
+    §5): a node whose frictionless end velocity ``w`` could be stopped within ``mu_s F_N``
+    sticks, any other slides with ``mu_d F_N`` against ``w`` (the lumped mass matrix is
+    diagonal on the ground, so each node is decided on its own).
+    Returns (fluid power, friction power)."""
     n = q.size
     F, a, m, fext = buf[B_F], buf[B_A], buf[B_M], buf[B_FEXT]
     for i in range(n):
         F[i] = fext[i]
     p_fluid = assemble(q, v, kbar, lbar, prm, F, J, 0.0, 0.0, False, medium == MEDIUM_WATER)
+    if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
+        munk_force(q, v, prm, F)
     solve_mass(q, prm, m, F, a, J, ibuf[I_PIV], medium == MEDIUM_WATER)
     p_fric = 0.0
     for i in range(n):
@@ -666,21 +826,49 @@ def _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
 
 
 @njit(cache=True, error_model="numpy")
+def ledger_energies(q, v, kbar, lbar, prm, buf, out):
+    """Write the body's kinetic and elastic energy and the water's ``T_f`` (0 out of water)
+    into ``out[O_E_KIN]``, ``out[O_E_ELASTIC]``, ``out[O_T_FLUID]`` [J], and the energy ledger
+    since the start recorded at ``O_L0_*`` into ``out[O_LEDGER:]`` (``LEDGER_KEYS``)."""
+    m = buf[B_M]
+    ke = 0.0
+    for i in range(q.size):
+        ke += 0.5 * m[i] * v[i] * v[i]
+    out[O_E_KIN] = ke
+    out[O_E_ELASTIC] = elastic_energy(q, kbar, lbar, prm)
+    out[O_T_FLUID] = fluid_kinetic_energy(q, v, prm) if int(prm[P_MEDIUM]) == MEDIUM_WATER else 0.0
+    # the ledger since O_L0_*: actuator work = dissipation + energy changes + error
+    work = out[O_W_ACT] - out[O_L0_W_ACT]
+    error = work
+    for k, (now, start) in enumerate(((O_E_FLUID, O_L0_E_FLUID), (O_E_DAMP, O_L0_E_DAMP),
+                                      (O_E_FRICTION, O_L0_E_FRICTION), (O_E_KIN, O_L0_KIN),
+                                      (O_E_ELASTIC, O_L0_ELASTIC), (O_T_FLUID, O_L0_T_FLUID))):
+        term = out[now] - out[start]
+        out[O_LEDGER + 1 + k] = term
+        error -= term
+    out[O_LEDGER] = work
+    out[O_LEDGER + 7] = error
+
+
+@njit(cache=True, error_model="numpy")
 def simulate(q, v, kbar, lbar, u_k, u_l, prm, buf, J, ibuf, out, n_steps):
     """Advance one robot by ``n_steps`` steps of ``h`` with inputs held constant; stops at the
     first failure. Per step: rest shape moves by ``dt u`` each sub-step, the state follows by
-    the chosen integrator, then the state is checked. Writes diagnostics into ``out`` and
-    returns the status code (``OK`` = 0)."""
+    the chosen integrator, then the state is checked. Writes diagnostics into ``out`` (the
+    energies of :func:`ledger_energies` once, at the end) and returns the status code
+    (``OK`` = 0)."""
     h = prm[P_H]
     nsub = int(prm[P_SUBSTEPS])
     dt = h / nsub
     medium = int(prm[P_MEDIUM])
     symplectic = int(prm[P_METHOD]) == METHOD_SYMPLECTIC_EULER
+    damped = prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0
     status = OK
     for _ in range(n_steps):
         e_fluid = 0.0
         e_fric = 0.0
         e_act = 0.0
+        e_damp = 0.0
         niter = 0
         resid = 0.0
         for _s in range(nsub):
@@ -692,8 +880,12 @@ def simulate(q, v, kbar, lbar, u_k, u_l, prm, buf, J, ibuf, out, n_steps):
                     status = BAD_REST_LENGTH
             if status != OK:
                 break
+            # each power where the step evaluates its forces: start (explicit) or end (implicit)
+            p_damp = 0.0
             if symplectic:
                 p_act = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+                if damped:
+                    p_damp = damping_power(q, v, prm)
                 p_fluid, p_fric = _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium)
             else:
                 status, it, res, p_fluid, p_fric = _be_substep(
@@ -702,7 +894,10 @@ def simulate(q, v, kbar, lbar, u_k, u_l, prm, buf, J, ibuf, out, n_steps):
                 niter = max(niter, it)
                 resid = max(resid, res)
                 p_act = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+                if damped:
+                    p_damp = damping_power(q, v, prm)
             e_fluid += dt * p_fluid
+            e_damp += dt * p_damp
             e_fric += dt * p_fric
             e_act += dt * p_act
             if status != OK:
@@ -721,7 +916,10 @@ def simulate(q, v, kbar, lbar, u_k, u_l, prm, buf, J, ibuf, out, n_steps):
         out[O_E_FRICTION] += e_fric
         out[O_E_ACT] += abs(e_act)
         out[O_W_ACT] += e_act
+        out[O_P_DAMP] = e_damp / h
+        out[O_E_DAMP] += e_damp
         out[O_NSTEPS] += 1
         if status != OK:
-            return status
+            break
+    ledger_energies(q, v, kbar, lbar, prm, buf, out)
     return status

@@ -251,6 +251,13 @@ class Simulator:
         self._ibuf[K.I_FRICTION] = K.SLIDING
         self._buf[K.B_V0] = self._v  # the stepper's predictor starts from the current velocity
         self.failure = None
+        # the energy ledger starts here: energies now, work and dissipation accumulated so far
+        out = self._out
+        K.ledger_energies(self._q, self._v, self._kbar, self._lbar, self._prm, self._buf, out)
+        out[K.O_L0_KIN : K.O_L0_E_FRICTION + 1] = out[
+            [K.O_E_KIN, K.O_E_ELASTIC, K.O_T_FLUID, K.O_W_ACT, K.O_E_FLUID, K.O_E_DAMP, K.O_E_FRICTION]
+        ]
+        out[K.O_LEDGER : K.O_LEDGER + K.N_LEDGER] = 0.0
 
     def set_external_force(self, force=None) -> None:
         """Apply a constant external force to each node, (N, 2) [N]; ``None`` removes it."""
@@ -384,6 +391,26 @@ class Simulator:
         """Kinetic energy of the nodes (not of the entrained water) [J]."""
         return float(0.5 * self._buf[K.B_M] @ (self._v * self._v))
 
+    def fluid_kinetic_energy(self) -> float:
+        """Kinetic energy of the water moved with the body, ``T_f = sum_i 1/2 mu_n (v^i . n^i)^2``
+        (MODEL.md §4; 0 out of water) [J]."""
+        if self.config.medium != "water":
+            return 0.0
+        return float(K.fluid_kinetic_energy(self._q, self._v, self._prm))
+
+    def energy_ledger(self) -> dict[str, float]:
+        """The energy balance since the last :meth:`reset` or :meth:`set_state` (MODEL.md §4):
+        ``actuator_work = fluid_dissipation + damping_dissipation + friction_dissipation +
+        delta_kinetic + delta_elastic + delta_fluid_kinetic + error``, all in J.
+
+        ``delta_*`` are the changes of the body's kinetic energy, its elastic energy and the
+        water's kinetic energy ``T_f``. ``error`` is what the integrator created (> 0) or
+        destroyed (< 0), e.g. backward Euler's numerical damping; it shrinks with the step for
+        the consistent added mass. Work of :meth:`set_external_force` forces is not counted
+        (it shows up in ``error``).
+        """
+        return dict(zip(K.LEDGER_KEYS, self._out[K.O_LEDGER : K.O_LEDGER + K.N_LEDGER].tolist(), strict=True))
+
     def elastic_forces(self) -> np.ndarray:
         """Elastic plus damping forces on the nodes, (N, 2) [N]."""
         F = np.zeros(2 * self.N)
@@ -449,6 +476,17 @@ class Simulator:
         """Actuator energy since reset, the sum over steps of |work| [J] (a real actuator
         does not get back the work the body does on it)."""
         return float(self._out[K.O_E_ACT])
+
+    @property
+    def damping_power(self) -> float:
+        """Power lost to material damping over the last step,
+        ``damping_bend sum kappa_dot^2 + damping_stretch sum ldot^2`` [W]."""
+        return float(self._out[K.O_P_DAMP])
+
+    @property
+    def damping_energy(self) -> float:
+        """Energy lost to material damping since reset [J]."""
+        return float(self._out[K.O_E_DAMP])
 
     @property
     def actuator_work(self) -> float:
