@@ -20,6 +20,7 @@ def released(added_mass: str, method: str, substeps: int | None, T: float = 1.0,
     simulator and the energies body + ``T_f`` and body alone after every step."""
     sim = Simulator(
         SimConfig(
+            rod=Rod(damping_bend=0.0),
             medium="water",
             fluid=Fluid(**NO_DRAG, added_mass=added_mass),
             integrator=Integrator(method=method, substeps=substeps),

@@ -80,7 +80,7 @@ def test_bad_pulse_values_are_rejected():
     with pytest.raises(ConfigError, match=r"duty = 1.2 must be in \(0, 1\]"):
         make_policy("inching:wave=pulse,duty=1.2", env)
     with pytest.raises(ConfigError, match="duty = 0.5 applies to wave='pulse' only"):
-        make_policy("inching:duty=0.5", env)
+        make_policy("inching:wave=sine,duty=0.5", env)
     with pytest.raises(ValueError, match="wave = 'square'"):
         InchingWave(env, wave="square")
 
@@ -96,7 +96,7 @@ def test_pulse_spec_builds_the_policy_and_its_desired_lengths_are_the_pulse():
         assert np.array_equal(lbar[i], expect[0]) and np.array_equal(rate[i], expect[1])
     default = make_policy("inching:wave=pulse", env)
     assert default.duty == PULSE_DUTY
-    assert make_policy("inching", env).params.wave == "sine"  # today's default is unchanged
+    assert make_policy("inching", env).params.wave == "pulse"  # it moves the worm furthest
 
 
 def test_a_pulse_faster_than_the_actuators_warns():

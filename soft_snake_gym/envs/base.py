@@ -415,7 +415,12 @@ class SoftRobotEnv(gym.Env):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
+        del state["_ledger"]  # a view into the simulator's diagnostics: pickle would copy it
         return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._ledger = self.sim._out[K.O_LEDGER : K.O_LEDGER + K.N_LEDGER]
 
     # --- helpers --------------------------------------------------------------------------
     def _check_action(self, action) -> np.ndarray:

@@ -176,9 +176,9 @@ def elastic_energy(q, kbar, lbar, prm):
 def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
     """Add internal (elastic, damping) and, if ``water``, drag forces into F (2N,) [N].
 
-    If ``jac``, also add ``cx dF/dq + cv dF/dv`` into the band ``J``. Omitted from the
-    Jacobian (quasi-Newton, small at h = 0.01 s): the position dependence of the damping
-    forces. Returns the power lost to drag ``-sum F_D . v_edge`` [W].
+    If ``jac``, also add ``cx dF/dq + cv dF/dv`` into the band ``J`` (exact, damping's
+    position dependence included: without it Newton needs a second iteration every step).
+    Returns the power lost to drag ``-sum F_D . v_edge`` [W].
     """
     N = q.size // 2
     EA, EI, d, db = prm[P_EA], prm[P_EI], prm[P_DSTRETCH], prm[P_DBEND]
@@ -191,20 +191,31 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
         lb = lbar[k]
         strain = l / lb - 1.0
         f = -EA * strain
+        ldot = 0.0
         if d > 0.0:
-            f -= d * (tx * (v[2 * k + 2] - v[2 * k]) + ty * (v[2 * k + 3] - v[2 * k + 1]))
+            dvx, dvy = v[2 * k + 2] - v[2 * k], v[2 * k + 3] - v[2 * k + 1]
+            ldot = tx * dvx + ty * dvy
+            f -= d * ldot
         F[2 * k + 2] += f * tx
         F[2 * k + 3] += f * ty
         F[2 * k] -= f * tx
         F[2 * k + 1] -= f * ty
         if jac:
-            # -dF_{k+1}/dx_{k+1} = EA [t t^T / lbar + strain/l (I - t t^T)]
+            # -dF_{k+1}/dx_{k+1} = EA t t^T / lbar - f/l (I - t t^T) + d t p^T, with the
+            # turning of the stretch rate p = d ldot / d x_{k+1} = (dv - ldot t) / l
             a1 = EA / lb
-            a2 = EA * strain / l
+            a2 = -f / l
             s00 = cx * (a1 * tx * tx + a2 * (1.0 - tx * tx)) + cv * d * tx * tx
             s01 = cx * (a1 - a2) * tx * ty + cv * d * tx * ty
             s11 = cx * (a1 * ty * ty + a2 * (1.0 - ty * ty)) + cv * d * ty * ty
             _add_edge_pattern(J, k, s00, s01, s11)
+            if d > 0.0:
+                px, py = cx * d * (dvx - ldot * tx) / l, cx * d * (dvy - ldot * ty) / l
+                t00, t01, t10, t11 = tx * px, tx * py, ty * px, ty * py
+                _add_block(J, k, k, -t00, -t01, -t10, -t11)
+                _add_block(J, k, k + 1, t00, t01, t10, t11)
+                _add_block(J, k + 1, k, t00, t01, t10, t11)
+                _add_block(J, k + 1, k + 1, -t00, -t01, -t10, -t11)
     # bending (MODEL.md §3): F = -(EI/lvor)(kappa - kbar)(1 + kappa^2/4) d phi/d x
     for j in range(1, N - 1):
         kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = turning(q, j)
@@ -212,6 +223,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
         dk = kap - kbar[j - 1]
         w = 1.0 + 0.25 * kap * kap
         s = kb * dk * w  # dE/dphi
+        phidot = 0.0
         if db > 0.0:
             phidot = (g0x * v[2 * j - 2] + g0y * v[2 * j - 1] + g1x * v[2 * j]
                       + g1y * v[2 * j + 1] + g2x * v[2 * j + 2] + g2y * v[2 * j + 3])
@@ -224,13 +236,27 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
         F[2 * j + 3] -= s * g2y
         if jac:
             # d2E/dphi2 and the Hessians of the edge angles, H = -(t n^T + n t^T)/l^2
-            s2 = kb * (w * w + dk * 0.5 * kap * w)
+            # damping s_d = db w^2 phidot adds d s_d/dx = db w^2 (kappa phidot g + r), with
+            # r = (d phidot / d x) = sum_b d2phi/dx dx_b v_b
+            s2 = kb * (w * w + dk * 0.5 * kap * w) + db * w * w * kap * phidot
             alpha = -(cx * s2 + cv * db * w * w)
-            beta = -cx * kb * dk * w
+            beta = -cx * (kb * dk * w + db * w * w * phidot)
             ia = 1.0 / (la * la)
             ib = 1.0 / (lbn * lbn)
             ha00, ha01, ha11 = 2.0 * tax * tay * ia, (tay * tay - tax * tax) * ia, -2.0 * tax * tay * ia
             hb00, hb01, hb11 = 2.0 * tbx * tby * ib, (tby * tby - tbx * tbx) * ib, -2.0 * tbx * tby * ib
+            if db > 0.0:
+                # r_{j-1} = Ha (v_j - v_{j-1}), r_{j+1} = Hb (v_{j+1} - v_j), r_j = -(the two)
+                ux, uy = v[2 * j] - v[2 * j - 2], v[2 * j + 1] - v[2 * j - 1]
+                wx, wy = v[2 * j + 2] - v[2 * j], v[2 * j + 3] - v[2 * j + 1]
+                r0x, r0y = ha00 * ux + ha01 * uy, ha01 * ux + ha11 * uy
+                r2x, r2y = hb00 * wx + hb01 * wy, hb01 * wx + hb11 * wy
+                r1x, r1y = -r0x - r2x, -r0y - r2y
+                c = -cx * db * w * w
+                for a, gx, gy in ((j - 1, g0x, g0y), (j, g1x, g1y), (j + 1, g2x, g2y)):
+                    _add_block(J, a, j - 1, c * gx * r0x, c * gx * r0y, c * gy * r0x, c * gy * r0y)
+                    _add_block(J, a, j, c * gx * r1x, c * gx * r1y, c * gy * r1x, c * gy * r1y)
+                    _add_block(J, a, j + 1, c * gx * r2x, c * gx * r2y, c * gy * r2x, c * gy * r2y)
             # d2phi blocks: (0,0) -Ha, (0,1) Ha, (1,1) Hb - Ha, (1,2) -Hb, (2,2) Hb
             _add_block(J, j - 1, j - 1, alpha * g0x * g0x - beta * ha00, alpha * g0x * g0y - beta * ha01,
                        alpha * g0y * g0x - beta * ha01, alpha * g0y * g0y - beta * ha11)
