@@ -18,7 +18,7 @@ from typing import Any, TypeVar
 
 import yaml
 
-from soft_snake_gym.params import SimConfig
+from soft_snake_gym.params import SimConfig, plain_number
 
 __all__ = ["ConfigError", "load_yaml", "from_dict", "to_dict", "load_sim_config"]
 
@@ -106,13 +106,15 @@ def _coerce(value: Any, hint: Any, where: str) -> Any:
             raise ConfigError(f"{where} = {value!r} must be one of {list(allowed)}")
         return value
     if hint is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
+        number = plain_number(value)
+        if number is None:
             raise ConfigError(f"{where} = {value!r} must be a number")
-        return float(value)
+        return float(number)
     if hint is int:
-        if isinstance(value, bool) or not isinstance(value, int):
+        number = plain_number(value, integer=True)
+        if number is None:
             raise ConfigError(f"{where} = {value!r} must be an integer")
-        return value
+        return number
     if hint is bool:
         if not isinstance(value, bool):
             raise ConfigError(f"{where} = {value!r} must be true or false")

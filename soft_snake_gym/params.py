@@ -8,12 +8,27 @@ fails at construction time instead of as a NaN a thousand steps later.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import InitVar, dataclass, fields
-from typing import Literal
+from typing import Any, Literal
 
-__all__ = ["Rod", "Fluid", "Ground", "Integrator", "SimConfig", "Medium"]
+__all__ = ["Rod", "Fluid", "Ground", "Integrator", "SimConfig", "Medium", "plain_number"]
 
 Medium = Literal["water", "ground", "none"]
+
+
+def plain_number(value: Any, integer: bool = False) -> int | float | None:
+    """``value`` as a Python ``int`` or ``float`` if it is a real number (including numpy
+    scalars such as ``np.int64`` and ``np.float32``), else None. Booleans are not numbers.
+    With ``integer``, only integers (Python or numpy) qualify.
+
+    Frozen configs keep the Python number, so they stay hashable and YAML-dumpable.
+    """
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return None
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    return None if integer else float(value)
 
 
 def _check(owner: object, name: str, lo: float | None = None, hi: float | None = None,
@@ -24,8 +39,11 @@ def _check(owner: object, name: str, lo: float | None = None, hi: float | None =
     left = "(" if lo_open else "["
     right = ")" if hi_open else "]"
     allowed = f"{left}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{right}"
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    number = plain_number(value)
+    if number is None:
         raise ValueError(f"{cls}.{name} = {value!r} must be a number in {allowed}")
+    if type(number) is not type(value):  # a numpy scalar: keep the Python number
+        object.__setattr__(owner, name, number)
     bad = not math.isfinite(value)
     if lo is not None:
         bad |= value <= lo if lo_open else value < lo
@@ -39,10 +57,11 @@ def _check_int(owner: object, name: str, lo: int, hi: int | None = None) -> None
     value = getattr(owner, name)
     cls = type(owner).__name__
     allowed = f"[{lo}, {'inf' if hi is None else hi}]"
-    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (
-        hi is not None and value > hi
-    ):
+    number = plain_number(value, integer=True)
+    if number is None or number < lo or (hi is not None and number > hi):
         raise ValueError(f"{cls}.{name} = {value!r} must be an integer in {allowed}")
+    if type(number) is not type(value):  # a numpy integer: keep the Python int
+        object.__setattr__(owner, name, number)
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ import numpy as np
 from soft_snake_gym.config import ConfigError, from_dict, load_yaml
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.task import G
-from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig
+from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig, plain_number
 from soft_snake_gym.physics import Simulator, body_from_curvature
 from soft_snake_gym.physics import kernels as K
 
@@ -39,7 +39,8 @@ __all__ = [
 
 # --- settings ---------------------------------------------------------------------------------
 def _check_number(cls: str, name: str, value: Any, lo: float | None = None, lo_open: bool = False) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    number = plain_number(value)
+    if number is None or not math.isfinite(number):
         raise ValueError(f"{cls}.{name} = {value!r} must be a finite number")
     if lo is not None and (value <= lo if lo_open else value < lo):
         raise ValueError(f"{cls}.{name} = {value!r} must be {'>' if lo_open else '>='} {lo}")
@@ -78,12 +79,16 @@ class Randomization:
             rng = getattr(self, f.name)
             if rng is None:
                 continue
-            rng = tuple(rng)
+            try:
+                rng = tuple(plain_number(v) for v in rng)
+            except TypeError:
+                rng = (None,)
+            if len(rng) != 2 or not all(v is not None and math.isfinite(v) for v in rng):
+                raise ValueError(
+                    f"Randomization.{f.name} = {getattr(self, f.name)!r} must be a pair [low, high] "
+                    "of finite numbers"
+                )
             object.__setattr__(self, f.name, rng)
-            if len(rng) != 2 or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in rng
-            ):
-                raise ValueError(f"Randomization.{f.name} = {rng!r} must be a pair [low, high] of finite numbers")
             lo, hi = rng
             positive = f.name in ("E", "E_bend")
             if lo > hi or lo < 0 or (positive and lo <= 0):
@@ -139,6 +144,10 @@ class BaseSettings:
 
     def __post_init__(self) -> None:
         cls = type(self).__name__
+        for f in dataclasses.fields(self):  # numpy scalars become Python numbers
+            number = plain_number(getattr(self, f.name))
+            if number is not None and type(number) is not type(getattr(self, f.name)):
+                object.__setattr__(self, f.name, number)
         if self.dt is not None:
             _check_number(cls, "dt", self.dt, 0.0, lo_open=True)
             ratio = self.dt / self.integrator.h

@@ -1,0 +1,43 @@
+"""Input handling and messages found rough in use (issue 15): numpy scalars, wording,
+duplicate YAML keys, randomization ranges, early argument checks, documentation."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import yaml
+
+import soft_snake_gym  # noqa: F401 - registers the ids
+from soft_snake_gym.config import ConfigError, from_dict, load_yaml
+from soft_snake_gym.envs.base import Randomization
+from soft_snake_gym.envs.swim import SwimSettings
+from soft_snake_gym.params import Integrator, Rod, SimConfig
+
+
+# --- numpy scalars ----------------------------------------------------------------------------
+def test_numpy_scalars_are_accepted_and_stored_as_python_numbers():
+    rod = Rod(N=np.int64(12), E=np.float32(2e6), edge_length=np.float16(0.25))
+    assert type(rod.N) is int and rod.N == 12 and rod.length == pytest.approx(11 * 0.25)
+    assert type(rod.E) is float and rod.E == pytest.approx(2e6)
+    assert type(Integrator(substeps=np.int32(3)).substeps) is int
+    cfg = from_dict(SimConfig, {"rod": {"N": np.uint8(5), "E": np.float32(1e6)}})
+    assert type(cfg.rod.N) is int and type(cfg.rod.E) is float
+    env = gym.make("SoftEel-v0", rod={"N": np.int64(12), "E": np.float32(2e6)}, dt=np.float32(0.02),
+                   max_curvature_rate=np.float32(3.0),
+                   randomize={"E": [np.float32(1e6), np.int64(3_000_000)]})
+    s = env.unwrapped.settings
+    assert env.unwrapped.N == 12 and type(s.max_curvature_rate) is float
+    assert s.randomize.E == (1e6, 3e6) and all(type(v) is float for v in s.randomize.E)
+    hash(s)  # frozen settings stay hashable and dump to plain YAML
+    assert "!!python" not in yaml.safe_dump(dataclasses.asdict(s))
+    env.reset(seed=0)
+    env.unwrapped.reset(options={"goal_direction": np.float32(0.5)})
+    assert env.unwrapped.goal_direction == pytest.approx(0.5)
+    # still refused: booleans and non-integral values for an integer field
+    with pytest.raises(ValueError, match=r"Rod.N = np.True_ must be an integer|Rod.N = True"):
+        Rod(N=np.bool_(True))
+    with pytest.raises(ConfigError, match="must be an integer"):
+        from_dict(Rod, {"N": np.float64(12.0)})
