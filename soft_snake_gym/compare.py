@@ -86,6 +86,13 @@ def plot_comparison(results: dict[str, dict[str, tuple[float, float]]], path: st
     return path
 
 
+def _episodes_on_seeds(episodes: int, seed: int) -> str:
+    """``1 episode per policy, seed 0`` or ``10 episodes per policy, seeds 0..9``."""
+    if episodes == 1:
+        return f"1 episode per policy, seed {seed}"
+    return f"{episodes} episodes per policy, seeds {seed}..{seed + episodes - 1}"
+
+
 def _arguments(p) -> None:
     p.add_argument("env_id", nargs="?", default="SoftEel-v0", help="environment id (default SoftEel-v0)")
     p.add_argument("--policies", nargs="+", metavar="SPEC",
@@ -106,7 +113,7 @@ def _run(args) -> int:
     if not specs:
         raise CLIError(f"give --policies for {args.env_id} (defaults exist for {', '.join(DEFAULT_POLICIES)})")
     results = compare(args.env_id, specs, args.episodes, args.seed)
-    title = f"{args.env_id}: {args.episodes} episodes per policy, seeds {args.seed}..{args.seed + args.episodes - 1}"
+    title = f"{args.env_id}: {_episodes_on_seeds(args.episodes, args.seed)}"
     print(format_comparison(results, title))
     out = plot_comparison(results, args.out or f"compare_{args.env_id}.png", title)
     print(f"wrote {out}")

@@ -30,7 +30,23 @@ class ConfigError(ValueError):
 
 
 class _Loader(yaml.SafeLoader):
-    """SafeLoader that also reads ``1e6`` and ``2e-3`` as floats (YAML 1.1 wants ``1.0e+6``)."""
+    """SafeLoader that also reads ``1e6`` and ``2e-3`` as floats (YAML 1.1 wants ``1.0e+6``)
+    and refuses a key given twice in one mapping (PyYAML would keep the last silently)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen: dict[Any, Any] = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                first = seen.setdefault(key, key_node.start_mark)
+            except TypeError:  # an unhashable key: PyYAML's own error follows
+                continue
+            if first is not key_node.start_mark:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r} (first given on line {first.line + 1})",
+                    key_node.start_mark,
+                )
+        return super().construct_mapping(node, deep=deep)
 
 
 _Loader.add_implicit_resolver(
@@ -54,6 +70,8 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
         ConfigError: the file is missing, is not valid YAML, or is not a mapping.
     """
     path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"config file {str(path)!r} is a folder; give the path of a YAML file")
     if not path.is_file():
         raise ConfigError(f"config file {str(path)!r} does not exist; check the path")
     try:
@@ -79,7 +97,7 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
 
 def _unknown_key_message(where: str, key: str, valid: list[str]) -> str:
     close = difflib.get_close_matches(str(key), valid, n=1)
-    hint = f"; did you mean {close[0]!r}?" if close else ""
+    hint = f"; did you mean {close[0]!r}?" if close else "."
     return f"unknown key {key!r} in {where}{hint} Valid keys: {', '.join(valid)}"
 
 
@@ -152,11 +170,28 @@ def from_dict(cls: type[T], data: Any, where: str | None = None) -> T:
     for key, value in data.items():
         if key not in valid and key not in retired:  # a retired key's own check explains it
             raise ConfigError(_unknown_key_message(where, key, valid))
-        kwargs[key] = _coerce(value, hints[key], f"{where}.{key}")
+        try:
+            kwargs[key] = _coerce(value, hints[key], f"{where}.{key}")
+        except ConfigError as err:
+            raise ConfigError(_with_range(cls, key, value, where) or str(err)) from None
     try:
         return cls(**kwargs)
     except ValueError as err:
         raise ConfigError(str(err)) from None
+
+
+def _with_range(cls: type, key: str, value: Any, where: str) -> str | None:
+    """The dataclass's own message for a value of the wrong type, which names the allowed
+    range (``Rod.E = 'abc' must be a number in (0.0, inf)``), under the name ``where.key``;
+    None if the class has no check of its own for ``key``."""
+    try:
+        cls(**{key: value})
+    except (ValueError, TypeError) as err:
+        own = f"{cls.__name__}.{key} = "
+        message = str(err)
+        if message.startswith(own):
+            return f"{where}.{key} = {message[len(own):]}"
+    return None
 
 
 def to_dict(obj: Any) -> dict[str, Any]:

@@ -36,8 +36,8 @@ def _check(owner: object, name: str, lo: float | None = None, hi: float | None =
     """Raise ``ValueError`` unless ``owner.name`` is a finite number within [lo, hi]."""
     value = getattr(owner, name)
     cls = type(owner).__name__
-    left = "(" if lo_open else "["
-    right = ")" if hi_open else "]"
+    left = "(" if lo_open or lo is None else "["
+    right = ")" if hi_open or hi is None else "]"
     allowed = f"{left}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{right}"
     number = plain_number(value)
     if number is None:

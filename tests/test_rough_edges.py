@@ -41,3 +41,35 @@ def test_numpy_scalars_are_accepted_and_stored_as_python_numbers():
         Rod(N=np.bool_(True))
     with pytest.raises(ConfigError, match="must be an integer"):
         from_dict(Rod, {"N": np.float64(12.0)})
+
+
+# --- wording ----------------------------------------------------------------------------------
+def test_messages_name_the_range_the_path_and_end_sentences(tmp_path):
+    with pytest.raises(ConfigError) as err:
+        gym.make("SoftEel-v0", rod={"E": "abc"})
+    assert str(err.value) == "SoftEel-v0.rod.E = 'abc' must be a number in (0.0, inf)"
+    with pytest.raises(ConfigError, match=r"SoftEel-v0.max_curvature_rate = 'x' must be a finite number > 0"):
+        gym.make("SoftEel-v0", max_curvature_rate="x")
+    with pytest.raises(ConfigError) as err:
+        from_dict(Rod, {"zzzz": 1})
+    assert "unknown key 'zzzz' in Rod. Valid keys: N, " in str(err.value)
+    with pytest.raises(ConfigError, match="did you mean 'edge_mass'\\? Valid keys"):
+        from_dict(Rod, {"edge_mas": 1})
+    with pytest.raises(ConfigError, match="is a folder; give the path of a YAML file"):
+        load_yaml(tmp_path)
+
+
+def test_a_yaml_key_given_twice_is_an_error(tmp_path):
+    path = tmp_path / "dup.yaml"
+    path.write_text("rod:\n  E: 1.0e6\n  N: 12\n  E: 2.0e6\n")
+    with pytest.raises(ConfigError, match=r"line 4.*duplicate key 'E' \(first given on line 2\)"):
+        load_yaml(path)
+    path.write_text("rod:\n  E: 1.0e6\nfluid:\n  E: 2.0e6\n")  # the same key in two mappings is fine
+    assert load_yaml(path) == {"rod": {"E": 1e6}, "fluid": {"E": 2e6}}
+
+
+def test_compare_title_counts_one_episode_in_the_singular():
+    from soft_snake_gym.compare import _episodes_on_seeds
+
+    assert _episodes_on_seeds(1, 0) == "1 episode per policy, seed 0"
+    assert _episodes_on_seeds(3, 5) == "3 episodes per policy, seeds 5..7"

@@ -41,7 +41,8 @@ __all__ = [
 def _check_number(cls: str, name: str, value: Any, lo: float | None = None, lo_open: bool = False) -> None:
     number = plain_number(value)
     if number is None or not math.isfinite(number):
-        raise ValueError(f"{cls}.{name} = {value!r} must be a finite number")
+        bound = "" if lo is None else f" {'>' if lo_open else '>='} {lo}"
+        raise ValueError(f"{cls}.{name} = {value!r} must be a finite number{bound}")
     if lo is not None and (value <= lo if lo_open else value < lo):
         raise ValueError(f"{cls}.{name} = {value!r} must be {'>' if lo_open else '>='} {lo}")
 
@@ -171,7 +172,7 @@ def resolve_settings(settings_cls: type, medium: str, config: str | Path | None,
     environment's medium. Unknown keys are rejected with the closest valid name.
     """
     data: dict[str, Any] = {}
-    where = f"the keywords of {label}" if label else settings_cls.__name__
+    where = label or settings_cls.__name__
     if config is not None:
         data = dict(load_yaml(config))
         where = Path(config).name
