@@ -12,8 +12,6 @@ import yaml
 
 import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.config import ConfigError, from_dict, load_yaml
-from soft_snake_gym.envs.base import Randomization
-from soft_snake_gym.envs.swim import SwimSettings
 from soft_snake_gym.params import Integrator, Rod, SimConfig
 
 
