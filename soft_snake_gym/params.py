@@ -153,10 +153,10 @@ class Fluid:
     """Water at rest, Morison-type drag and normal added mass (MODEL.md §4).
 
     Attributes:
-        rho: density [kg/m^3].
-        C_f: tangential (skin friction) drag coefficient [-].
-        C_D: normal drag coefficient [-].
-        C_A: normal added-mass coefficient [-].
+        rho: density of the water [kg/m^3].
+        C_f: tangential (skin friction) drag coefficient [-], on the edge's surface.
+        C_D: normal drag coefficient [-], on the edge's projected area.
+        C_A: normal added-mass coefficient [-], times the water displaced by the edge.
         added_mass: ``"consistent"`` (default): the Lagrangian force of the water's kinetic
             energy ``T_f``, which exchanges energy with the body without creating any;
             ``"kelasidi"``: the sources' acceleration term alone, which does net work on
@@ -183,7 +183,16 @@ class Fluid:
 
 @dataclass(frozen=True)
 class Ground:
-    """Stick-slip (Karnopp) Coulomb friction on a flat floor (MODEL.md §5)."""
+    """Stick-slip (Karnopp) Coulomb friction on a flat floor (MODEL.md §5).
+
+    Attributes:
+        mu_s: static friction coefficient [-]: a node at rest stays stuck while the tangential
+            force on it is at most ``mu_s m g``.
+        mu_d: kinetic (dynamic) friction coefficient [-], ``0 <= mu_d <= mu_s``: a sliding node
+            feels ``mu_d m g`` against its velocity.
+        V_tol: speed below which a node counts as at rest [m/s].
+        g: gravitational acceleration [m/s^2].
+    """
 
     mu_s: float = 1.15
     mu_d: float = 0.8

@@ -71,3 +71,39 @@ def test_compare_title_counts_one_episode_in_the_singular():
 
     assert _episodes_on_seeds(1, 0) == "1 episode per policy, seed 0"
     assert _episodes_on_seeds(3, 5) == "3 episodes per policy, seeds 5..7"
+
+
+# --- documentation and the Gymnasium contract ---------------------------------------------------
+@pytest.mark.parametrize("env_id", ["SoftEel-v0", "SoftWorm-v0"])
+def test_help_documents_the_env_not_gymnasium_generic_text(env_id):
+    import pydoc
+
+    cls = type(gym.make(env_id).unwrapped)
+    text = pydoc.render_doc(cls, renderer=pydoc.plaintext)
+    assert "CartPole" not in text and "ansi" not in text
+    for name in ("sim", "dt", "observation_structure"):
+        assert f"``{name}``" in text, name
+    for method in (cls.step, cls.reset, cls.render):
+        assert method.__doc__ and "CartPole" not in method.__doc__ and "ansi" not in method.__doc__
+    assert "ResetNeeded" in cls.step.__doc__
+
+
+def test_ground_and_fluid_document_their_fields_with_units():
+    from soft_snake_gym.params import Fluid, Ground
+
+    for cls in (Fluid, Ground):
+        doc = cls.__doc__
+        for f in dataclasses.fields(cls):
+            assert f"{f.name}:" in doc, (cls.__name__, f.name)
+    assert "[m/s]" in Ground.__doc__ and "[m/s^2]" in Ground.__doc__ and "[kg/m^3]" in Fluid.__doc__
+
+
+@pytest.mark.parametrize("env_id", ["SoftEel-v0", "SoftWorm-v0"])
+def test_step_before_reset_raises_reset_needed_without_gym_make(env_id):
+    from soft_snake_gym.envs import InchEnv, SwimEnv
+
+    env = {"SoftEel-v0": SwimEnv, "SoftWorm-v0": InchEnv}[env_id]()
+    with pytest.raises(gym.error.ResetNeeded, match="call reset"):
+        env.step(env.action_space.sample())
+    env.reset(seed=0)
+    env.step(np.zeros(env.action_space.shape, dtype=np.float32))

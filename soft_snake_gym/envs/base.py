@@ -201,6 +201,21 @@ class SoftRobotEnv(gym.Env):
     Subclasses set ``medium``, ``settings_class``, ``env_id`` and implement the hooks
     ``_setup_task``, ``_build_spaces``, ``_action_params``, ``_initial_body``, ``_state_info``
     and ``_check_options``.
+
+    Attributes:
+        settings: the validated constructor keywords (``SwimSettings`` or ``InchSettings``).
+        sim: the :class:`~soft_snake_gym.physics.Simulator` (one robot), built once and
+            reused by every ``reset``; read its state (``sim.x`` (N, 2) [m], ``sim.kbar``,
+            ``sim.lbar``, energies) between steps, but step through the env.
+        base_config: the :class:`~soft_snake_gym.params.SimConfig` the env was built with
+            (``randomize`` draws around it at each reset).
+        N: number of nodes.
+        dt: control step [s]: ``n_substeps`` integrator steps of ``integrator.h``.
+        n_substeps: integrator steps per control step.
+        observation_structure: block name -> size of the observation, in order.
+        goal_direction: the episode's goal direction [rad from +x].
+        randomized: the physics values drawn at the last reset (empty without ``randomize``).
+        total_mass: mass of the body [kg].
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 100}
@@ -283,6 +298,7 @@ class SoftRobotEnv(gym.Env):
         self._phys = (sim._q, sim._v, sim._kbar, sim._lbar, sim._prm, sim._buf, sim._J, sim._ibuf, sim._out)
         self._set_goal(s.goal_direction)
         self._failure: str | None = None
+        self._needs_reset = True
         self._trail_com: deque = deque(maxlen=self.trail_length)
         self._trail_head: deque = deque(maxlen=self.trail_length)
         self.randomized: dict[str, float] = {}
@@ -313,6 +329,20 @@ class SoftRobotEnv(gym.Env):
 
     # --- gymnasium API --------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Start an episode; returns ``(observation, info)``.
+
+        Args:
+            seed: seeds ``np_random`` (reset noise and ``randomize`` draws); None continues
+                the current generator.
+            options: ``goal_direction`` [rad] for this episode, and/or an exact initial body:
+                ``x`` (N, 2) [m], ``v`` (N, 2) [m/s], ``kbar`` (N-2,) [-], ``lbar`` (N-1,) [m]
+                (missing parts: at rest, straight rest shape, ``x`` built from ``kbar`` and
+                ``lbar``). Unknown options raise ``ValueError``.
+
+        Returns:
+            The first observation (see the class docstring's Observation Space) and ``info``
+            with the state entries, ``randomized`` (the drawn physics) and ``failure`` (None).
+        """
         super().reset(seed=seed)
         s = self.settings
         options = dict(options or {})
@@ -339,6 +369,7 @@ class SoftRobotEnv(gym.Env):
         self.sim.reset(**body)
 
         self._failure = None
+        self._needs_reset = False
         q, v, kbar, lbar, prm, _, _, ibuf, out = self._phys
         T.robot_reset(q, v, kbar, lbar, prm, ibuf, out, self._w, self._tp, self._obs_low,
                       self._obs_high, self._obs_raw, self._obs, self._rs)
@@ -354,6 +385,26 @@ class SoftRobotEnv(gym.Env):
         return self._obs.copy(), info
 
     def step(self, action):
+        """Hold ``action`` for one control step of ``dt`` seconds and advance the physics.
+
+        Args:
+            action: (n_inputs,) in [-1, 1] (clipped beyond); scaled to the input rates as the
+                class docstring's Action Space says. A wrong shape or a NaN raises ``ValueError``.
+
+        Returns:
+            ``(observation, reward, terminated, truncated, info)``: ``terminated`` is True on a
+            physics failure (``info["failure"]`` names it); ``truncated`` is always False here
+            (``TimeLimit`` from ``gym.make`` truncates); ``info`` holds every reward term, the
+            state and the running ``metrics``.
+
+        Raises:
+            gymnasium.error.ResetNeeded: ``step`` before the first ``reset``.
+            RuntimeError: ``step`` after a failure, before ``reset``.
+        """
+        if self._needs_reset:
+            raise gym.error.ResetNeeded(
+                f"{self.env_id}: call reset() before step() (the episode has not started)"
+            )
         if self._failure is not None:
             raise RuntimeError(
                 f"{self.env_id} episode terminated ({self._failure}); call reset() before stepping again"
@@ -391,6 +442,10 @@ class SoftRobotEnv(gym.Env):
         return self._obs.copy(), r[T.R_REWARD], not ok, False, info
 
     def render(self):
+        """The current frame: an (H, W, 3) uint8 RGB array with ``render_mode="rgb_array"``;
+        with ``"human"``, draws into a window and returns None. The picture shows the body
+        (head in red), the recent trails of the centre of mass and the head, the goal
+        direction, the time and, on the ground, the nodes stuck to the floor."""
         if self.render_mode is None:
             gym.logger.warn(
                 f"render() called without a render_mode; create the env with "
