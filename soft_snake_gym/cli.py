@@ -151,9 +151,12 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every registered subcommand."""
+    from soft_snake_gym import __version__
+
     parser = _Parser(
         prog="soft-snake", description="Soft segmented robots: simulate, evaluate, sweep, reproduce."
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subs = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
     for sub in SUBCOMMANDS.values():
         p = subs.add_parser(sub.name, help=sub.help, description=sub.help)

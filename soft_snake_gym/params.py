@@ -69,7 +69,9 @@ class Rod:
     """The soft body: N nodes, N-1 edges of elliptic cross-section (MODEL.md §3, §9).
 
     Attributes:
-        N: number of nodes (>= 3); the head is node N-1.
+        N: number of nodes (>= 3); the head is node N-1. More nodes add edges of the same
+            ``edge_length`` and ``edge_mass``: a longer, heavier robot, not a finer model of
+            the same one (N = 300 is a 53.8 m body).
         edge_length: rest length of every edge at rest, ``lbar`` at t = 0 [m].
         edge_mass: mass of every edge [kg]; node masses are lumped from it.
         a: half-height of the cross-section, out of the plane [m].

@@ -107,3 +107,49 @@ def test_step_before_reset_raises_reset_needed_without_gym_make(env_id):
         env.step(env.action_space.sample())
     env.reset(seed=0)
     env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+
+
+# --- the README's snippets and the version --------------------------------------------------------
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+
+
+def _readme_block(after: str, lang: str = "python") -> str:
+    """The first fenced ``lang`` block of README.md after the line containing ``after``."""
+    text = (ROOT / "README.md").read_text()
+    start = text.index(f"```{lang}\n", text.index(after)) + len(lang) + 4
+    return text[start : text.index("```", start)]
+
+
+def test_readme_simulator_snippet_prints_what_the_readme_shows(capsys, monkeypatch):
+    code = _readme_block("## The simulator")
+    shown = _readme_block("## The simulator", "text")
+    monkeypatch.chdir(ROOT)
+    exec(compile(code, "README.md", "exec"), {})
+    assert capsys.readouterr().out == shown
+
+
+def test_readme_pid_snippet_runs_without_warnings(monkeypatch):
+    import warnings
+
+    code = _readme_block("through SB3's `evaluate_policy`, exactly as a trained agent does.")
+    assert "evaluate_policy(pid, env" in code
+    monkeypatch.chdir(ROOT)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        exec(compile(code, "README.md", "exec"), {})
+
+
+def test_readme_and_rod_say_that_n_adds_edges_of_the_same_length():
+    rod = Rod(N=300)
+    assert round(rod.length, 1) == 53.8 and round(rod.total_mass) == 239
+    assert "`N = 300` is a 53.8 m body of 239 kg" in (ROOT / "README.md").read_text()
+    assert "N = 300 is a 53.8 m body" in " ".join(Rod.__doc__.split())
+
+
+def test_version_option(capsys):
+    from soft_snake_gym.cli import main
+
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0
+    assert capsys.readouterr().out.strip() == f"soft-snake {soft_snake_gym.__version__}"
