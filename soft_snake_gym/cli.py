@@ -13,6 +13,7 @@ import json
 import math
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,13 +98,25 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
 
 @subcommand("evaluate", "evaluate a baseline or a trained model for K episodes", _evaluate_arguments)
 def _evaluate(args: argparse.Namespace) -> int:
-    from soft_snake_gym.evaluation import evaluate, format_table, make_eval_env, summarize
+    from soft_snake_gym.evaluation import (
+        check_transient,
+        check_video_path,
+        evaluate,
+        format_table,
+        make_eval_env,
+        summarize,
+    )
     from soft_snake_gym.policies import make_policy
 
     if args.episodes < 1:
         raise CLIError(f"--episodes {args.episodes} must be at least 1")
-    if args.video and Path(args.video).suffix.lower() not in (".mp4", ".gif"):
-        raise CLIError(f"--video {args.video!r} must end in .mp4 or .gif")
+    if not (math.isfinite(args.transient) and args.transient >= 0):
+        raise CLIError(f"--transient {args.transient:g} must be a number of seconds >= 0")
+    if args.video:
+        try:
+            check_video_path(args.video)
+        except ValueError as err:
+            raise CLIError(f"--video: {err}") from None
     env_kwargs = _parse_env_kwargs(args.env_kwarg)
     if args.env_config:
         env_kwargs["config"] = args.env_config
@@ -113,14 +126,25 @@ def _evaluate(args: argparse.Namespace) -> int:
         env_kwargs["max_episode_steps"] = args.max_steps
     env = make_eval_env(args.env_id, seed=args.seed, env_kwargs=env_kwargs,
                         render_mode="rgb_array" if args.video else None)
+    inner = env.envs[0]
+    if inner.spec is not None and inner.spec.max_episode_steps:
+        try:
+            check_transient(args.transient, inner.spec.max_episode_steps * inner.unwrapped.dt)
+        except ValueError as err:
+            raise CLIError(f"--transient: {err}") from None
     policy = make_policy(args.policy, env, config=args.policy_config)
     t0 = time.perf_counter()
     episodes = evaluate(policy, env, episodes=args.episodes, transient=args.transient, video=args.video)
     elapsed = time.perf_counter() - t0
     summary = summarize(episodes)
+    whole = sum(e["window_start"] != args.transient for e in episodes)
+    window = f"metrics after a {args.transient:g} s transient"
+    if whole:
+        window += f", over the whole episode for the {whole} that ended before twice that"
+    durations = sorted({round(e["duration"], 1) for e in episodes})
+    each = f"{durations[0]:.1f} s each" if len(durations) == 1 else f"{durations[0]:.1f}-{durations[-1]:.1f} s"
     title = (f"{args.env_id}  policy={args.policy}  episodes={args.episodes}  "
-             f"({episodes[0]['duration']:.1f} s each, metrics after a {args.transient:g} s transient; "
-             f"{elapsed:.1f} s wall)")
+             f"({each}, {window}; {elapsed:.1f} s wall)")
     print(format_table(summary, title))
     failures = [e["failure"] for e in episodes if e["failure"]]
     if failures:
@@ -183,6 +207,12 @@ def main(argv: list[str] | None = None) -> int:
     _load_subcommands()
     parser = build_parser()
     args = parser.parse_args(argv)
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        print(f"soft-snake {args._name}: warning: {message}", file=sys.stderr)
+
+    shown = warnings.showwarning
+    warnings.showwarning = one_line
     try:
         return int(args._run(args) or 0)
     except _user_errors() as err:
@@ -192,6 +222,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"soft-snake {args._name}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        warnings.showwarning = shown
 
 
 if __name__ == "__main__":  # python -m soft_snake_gym.cli: use the importable module's registry

@@ -153,3 +153,35 @@ def test_version_option(capsys):
         main(["--version"])
     assert done.value.code == 0
     assert capsys.readouterr().out.strip() == f"soft-snake {soft_snake_gym.__version__}"
+
+
+# --- randomization ranges -------------------------------------------------------------------------
+def test_randomization_ranges_that_break_mu_d_le_mu_s_are_rejected():
+    with pytest.raises(ConfigError, match=r"randomize.mu_d high 2.0 exceeds ground.mu_s = 1.15"):
+        gym.make("SoftWorm-v0", randomize={"mu_d": [1.0, 2.0]})
+    with pytest.raises(ConfigError, match=r"randomize.mu_d high 0.9 exceeds randomize.mu_s low 0.8"):
+        gym.make("SoftWorm-v0", randomize={"mu_s": [0.8, 1.2], "mu_d": [0.5, 0.9]})
+    with pytest.raises(ConfigError, match=r"ground.mu_d = 0.8 exceeds randomize.mu_s low 0.5"):
+        gym.make("SoftWorm-v0", randomize={"mu_s": [0.5, 1.2]})
+    env = gym.make("SoftWorm-v0", randomize={"mu_s": [0.8, 1.2], "mu_d": [0.5, 0.8]})
+    for seed in range(20):  # every draw is used as drawn, none clipped
+        drawn = env.reset(seed=seed)[1]["randomized"]
+        cfg = env.unwrapped.sim.config
+        assert drawn["mu_d"] <= drawn["mu_s"]
+        assert (cfg.ground.mu_s, cfg.ground.mu_d) == (drawn["mu_s"], drawn["mu_d"])
+
+
+@pytest.mark.parametrize("env_id,key,unused", [("SoftEel-v0", "mu_s", "ground"), ("SoftWorm-v0", "C_D", "fluid")])
+def test_randomizing_what_the_medium_ignores_is_rejected(env_id, key, unused):
+    with pytest.raises(ConfigError, match=rf"{env_id}.randomize: {key} has no effect .*\({unused} parameters\)"):
+        gym.make(env_id, randomize={"E": [1e6, 2e6], key: [0.5, 0.6]})
+
+
+def test_symplectic_with_tens_of_thousands_of_substeps_warns():
+    with pytest.warns(UserWarning, match=r"symplectic_euler' takes [\d,]+ sub-steps per h = 0.01 s"):
+        gym.make("SoftEel-v0", integrator={"method": "symplectic_euler"}, rod={"E": 2e10, "damping_bend": 0.1})
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gym.make("SoftEel-v0", integrator={"method": "symplectic_euler"}, rod={"damping_bend": 0.1})

@@ -14,6 +14,7 @@ import dataclasses
 import math
 import os
 import sys
+import warnings
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +38,10 @@ __all__ = [
     "resolve_settings",
 ]
 
+SLOW_SUBSTEPS = 1000
+"""Explicit sub-steps per integrator step above which an env warns that it will be slow."""
+
+
 # --- settings ---------------------------------------------------------------------------------
 def _check_number(cls: str, name: str, value: Any, lo: float | None = None, lo_open: bool = False) -> None:
     number = plain_number(value)
@@ -54,8 +59,10 @@ class Randomization:
 
     Fields map onto :class:`~soft_snake_gym.params.Rod` (``E``, ``E_bend``, ``damping_bend``, ``damping_stretch``),
     :class:`~soft_snake_gym.params.Fluid` (``rho``, ``C_f``, ``C_D``, ``C_A``) and
-    :class:`~soft_snake_gym.params.Ground` (``mu_s``, ``mu_d``; a drawn ``mu_d`` above the drawn
-    ``mu_s`` is lowered to it). The draws happen in field order from ``env.np_random``.
+    :class:`~soft_snake_gym.params.Ground` (``mu_s``, ``mu_d``). The draws happen in field order
+    from ``env.np_random``. The env rejects ranges whose draws could break a constraint of the
+    parameters (``mu_d <= mu_s``) and parameters its medium does not use (``mu_s`` in water,
+    ``C_D`` on the ground).
     """
 
     E: tuple[float, float] | None = None
@@ -112,17 +119,38 @@ class Randomization:
             value = float(rng.uniform(bounds[0], bounds[1]))
             drawn[f.name] = value
             sections[self._SECTIONS[f.name]][f.name] = value
-        gr = sections["ground"]
-        mu_s = gr.get("mu_s", base.ground.mu_s)
-        if gr.get("mu_d", base.ground.mu_d) > mu_s:  # kinetic friction may not exceed static
-            gr["mu_d"] = drawn["mu_d"] = mu_s
         config = dataclasses.replace(
             base,
             rod=dataclasses.replace(base.rod, **sections["rod"]),
             fluid=dataclasses.replace(base.fluid, **sections["fluid"]),
-            ground=dataclasses.replace(base.ground, **gr),
+            ground=dataclasses.replace(base.ground, **sections["ground"]),
         )
         return config, drawn
+
+    def check(self, medium: str, ground: Ground, where: str) -> None:
+        """Raise ``ConfigError`` if a randomized parameter has no effect in ``medium`` or if
+        a draw could give ``mu_d > mu_s`` (with ``ground`` the values not randomized)."""
+        unused = {"water": "ground", "ground": "fluid"}.get(medium)
+        useless = [f.name for f in dataclasses.fields(self)
+                   if getattr(self, f.name) is not None and self._SECTIONS[f.name] == unused]
+        if useless:
+            raise ConfigError(
+                f"{where}.randomize: {', '.join(useless)} {'has' if len(useless) == 1 else 'have'} no "
+                f"effect in the {medium} ({unused} parameters); remove "
+                f"{'it' if len(useless) == 1 else 'them'}"
+            )
+        if medium != "ground":
+            return
+        mu_s_low = ground.mu_s if self.mu_s is None else self.mu_s[0]
+        mu_d_high = ground.mu_d if self.mu_d is None else self.mu_d[1]
+        if mu_d_high > mu_s_low:
+            mu_s = f"randomize.mu_s low {mu_s_low!r}" if self.mu_s else f"ground.mu_s = {mu_s_low!r}"
+            mu_d = f"randomize.mu_d high {mu_d_high!r}" if self.mu_d else f"ground.mu_d = {mu_d_high!r}"
+            raise ConfigError(
+                f"{where}: {mu_d} exceeds {mu_s}, so some draws would have kinetic friction above "
+                "static friction; keep every mu_d draw at or below every mu_s draw "
+                "(randomize.mu_d high <= randomize.mu_s low)"
+            )
 
 
 @dataclass(frozen=True)
@@ -228,6 +256,15 @@ class SoftRobotEnv(gym.Env):
     def __init__(self, render_mode: str | None = None, config: str | Path | None = None, **kwargs: Any):
         settings = resolve_settings(self.settings_class, self.medium, config, kwargs, self.env_id)
         self._setup(settings, render_mode)
+        n = self.sim.substeps
+        if settings.integrator.method == "symplectic_euler" and n > SLOW_SUBSTEPS:
+            warnings.warn(
+                f"{self.env_id}: integrator.method = 'symplectic_euler' takes {n:,} sub-steps per "
+                f"h = {settings.integrator.h:g} s for this rod (its stiffest stretching mode), so every "
+                "step is slow; use 'backward_euler' (one implicit step per h) or a softer or "
+                "coarser rod",
+                stacklevel=2,
+            )
 
     @classmethod
     def _over_arrays(cls, settings: BaseSettings, sim: Simulator, task: dict[str, np.ndarray]):
@@ -239,6 +276,7 @@ class SoftRobotEnv(gym.Env):
 
     def _setup(self, settings: BaseSettings, render_mode: str | None, sim: Simulator | None = None,
                task: dict[str, np.ndarray] | None = None) -> None:
+        settings.randomize.check(self.medium, settings.ground, self.env_id or type(self).__name__)
         self.settings = s = settings
         self.base_config = SimConfig(
             rod=s.rod, medium=self.medium, fluid=s.fluid, ground=s.ground, integrator=s.integrator

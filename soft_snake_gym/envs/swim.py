@@ -150,7 +150,7 @@ class SwimEnv(SoftRobotEnv):
     | `serpenoid_delta`     | float or None     | `None`         | phase offset (rad) between nodes; `None`: `2 pi/(N-2)` (pi/4 for N = 10)    |
     | `goal_direction`      | float             | `0.0`          | goal direction (rad from +x)                                                |
     | `max_observed_speed`  | float             | `2.0`          | bound of `com_velocity_body` (m/s)                                          |
-    | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping_bend, damping_stretch, rho, C_f, C_D, C_A, mu_s, mu_d |
+    | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping_bend, damping_stretch, rho, C_f, C_D, C_A (not the ground's) |
 
     ## Attributes
     - ``sim``: the :class:`~soft_snake_gym.physics.Simulator` (one robot), built once and
