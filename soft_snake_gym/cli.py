@@ -140,7 +140,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     whole = sum(e["window_start"] != args.transient for e in episodes)
     window = f"metrics after a {args.transient:g} s transient"
     if whole:
-        window += f", over the whole episode for the {whole} that ended before twice that"
+        window += (f" (over the whole episode for {whole} of {len(episodes)} that ended before "
+                   f"{2 * args.transient:g} s)")
     durations = sorted({round(e["duration"], 1) for e in episodes})
     each = f"{durations[0]:.1f} s each" if len(durations) == 1 else f"{durations[0]:.1f}-{durations[-1]:.1f} s"
     title = (f"{args.env_id}  policy={args.policy}  episodes={args.episodes}  "

@@ -185,3 +185,106 @@ def test_symplectic_with_tens_of_thousands_of_substeps_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         gym.make("SoftEel-v0", integrator={"method": "symplectic_euler"}, rod={"damping_bend": 0.1})
+
+
+# --- the command line checks everything before any work ----------------------------------------
+def _one_line_error(main_args, capsys, code=2) -> str:
+    from soft_snake_gym.cli import main
+
+    assert main(main_args) == code
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    return err
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Make any episode or env construction fail loudly: the checks must come first."""
+    import soft_snake_gym.compare as compare_mod
+    import soft_snake_gym.evaluation as evaluation
+
+    def boom(*args, **kwargs):
+        raise AssertionError("work started before the arguments were checked")
+
+    monkeypatch.setattr(evaluation, "evaluate", boom)
+    monkeypatch.setattr(compare_mod, "compare", boom)
+    import soft_snake_gym.sweep as sweep_mod
+
+    monkeypatch.setattr(sweep_mod, "run_cell", boom)
+
+
+def test_evaluate_without_the_video_extra_fails_before_the_episode(monkeypatch, capsys, no_work, tmp_path):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # as if the extra were not installed
+    err = _one_line_error(["evaluate", "SoftEel-v0", "--policy", "pid", "--video", str(tmp_path / "x.mp4")],
+                          capsys)
+    assert "needs imageio with ffmpeg (pip install 'soft-snake-gym[video]'); or give a .gif path" in err
+
+
+@pytest.mark.parametrize("transient,message", [
+    ("20", "transient = 20 s is longer than half the 10 s episode"),
+    ("-1", "--transient -1 must be a number of seconds >= 0"),
+    ("nan", "--transient nan must be"),
+])
+def test_evaluate_rejects_a_transient_that_leaves_no_window(transient, message, capsys, no_work):
+    err = _one_line_error(["evaluate", "SoftEel-v0", "--policy", "pid", "--transient", transient], capsys)
+    assert message in err
+
+
+def test_evaluate_header_says_when_episodes_were_too_short_for_the_transient(capsys):
+    from soft_snake_gym.cli import main
+
+    # a gait that folds the soft eel onto itself within 0.3 s
+    assert main(["evaluate", "SoftEel-v0", "--policy", "open-loop:alpha=2.5,omega=6", "--episodes", "2",
+                 "--env-kwarg", "max_curvature_rate=200", "--env-kwarg", "max_rest_curvature=10",
+                 "--max-steps", "300", "--transient", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "metrics after a 1 s transient (over the whole episode for 2 of 2 that ended before 2 s)" in out
+    assert "2 episode(s) ended in a failure: self_intersection" in out
+
+
+def test_evaluate_warns_when_a_baseline_gait_saturates_the_actions(capsys):
+    from soft_snake_gym.cli import main
+
+    assert main(["evaluate", "SoftEel-v0", "--policy", "pid:alpha=3,omega=100", "--episodes", "1",
+                 "--max-steps", "10", "--transient", "0"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("soft-snake evaluate: warning: the alpha = 3 rad, omega = 100")
+    assert "beyond the env's max_curvature_rate = 6.28 1/s" in err[0]
+    assert main(["evaluate", "SoftWorm-v0", "--policy", "inching:omega=20", "--episodes", "1",
+                 "--max-steps", "10", "--transient", "0"]) == 0
+    assert "beyond the env's max_length_rate = 0.3 m/s" in capsys.readouterr().err
+    assert main(["evaluate", "SoftEel-v0", "--policy", "pid", "--episodes", "1", "--max-steps", "10",
+                 "--transient", "0"]) == 0
+    assert capsys.readouterr().err == ""  # the default gait fits
+
+
+def test_compare_checks_the_chart_format_first(capsys, no_work, tmp_path):
+    err = _one_line_error(["compare", "SoftEel-v0", "--policies", "pid", "--out", str(tmp_path / "x.txt")],
+                          capsys)
+    assert "cannot draw a chart into" in err and ".png" in err
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--alpha-max", "4"], "--alpha-max 4 must be below pi rad"),
+    (["--workers", "0"], "--workers 0 must be at least 1"),
+    (["--workers", "-3"], "--workers -3 must be at least 1"),
+    (["--out", "{file}"], "is a file; give a folder"),
+])
+def test_sweep_checks_its_arguments_first(args, message, capsys, no_work, tmp_path):
+    file = tmp_path / "taken.csv"
+    file.write_text("")
+    args = [a.replace("{file}", str(file)) for a in args]
+    err = _one_line_error(["sweep", "swim-gait", "--no-progress", *args], capsys)
+    assert message in err
+
+
+def test_sweep_exits_nonzero_when_cells_could_not_run(capsys, no_work, tmp_path):
+    from soft_snake_gym.cli import main
+
+    code = main(["sweep", "swim-gait", "--no-progress", "--workers", "1", "--n-alpha", "1", "--n-omega", "1",
+                 "--out", str(tmp_path)])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "2 cells could not run" in err and "work started before" in err
