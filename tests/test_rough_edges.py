@@ -288,3 +288,30 @@ def test_sweep_exits_nonzero_when_cells_could_not_run(capsys, no_work, tmp_path)
     assert code == 1
     err = capsys.readouterr().err
     assert "2 cells could not run" in err and "work started before" in err
+
+
+# --- sweep heatmaps -------------------------------------------------------------------------------
+def test_heatmap_axes_span_the_grid_cells_not_beyond(tmp_path, monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from soft_snake_gym.figures import cell_edges, sweep_heatmaps
+    from soft_snake_gym.sweep import STUDIES
+
+    np.testing.assert_allclose(cell_edges([0.15, 1.52]), [0.15, 0.835, 1.52])
+    np.testing.assert_allclose(cell_edges([0.2, 0.4, 1.0]), [0.2, 0.3, 0.7, 1.0])  # uneven spacing
+    rows = [{"controller": c, "alpha": a, "omega": w, "E_bend": 1.87e4, "average_speed": a * w,
+             "curvature_error": 0.1, "mean_fluid_power": 1.0, "failure": ""}
+            for c in ("open-loop", "pid") for a in (0.15, 1.52) for w in (0.5, 3.1416)]
+    monkeypatch.setattr(plt, "close", lambda fig=None: None)  # keep the figures to inspect them
+    plt.close("all")
+    before = set(plt.get_fignums())
+    assert sweep_heatmaps(STUDIES["swim-gait"], rows, tmp_path)
+    fig = plt.figure(max(set(plt.get_fignums()) - before))
+    ax = fig.axes[0]
+    assert ax.get_ylim() == pytest.approx((0.15, 1.52)) and ax.get_xlim() == pytest.approx((0.5, 3.1416))
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["0.15", "1.52"]
+    for f in plt.get_fignums():
+        matplotlib.pyplot.figure(f).clf()
