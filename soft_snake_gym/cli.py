@@ -86,8 +86,9 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policy-config", metavar="YAML", help="YAML file of the policy's gait/gains")
     p.add_argument("--episodes", type=int, default=3, help="number of episodes (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
-    p.add_argument("--transient", type=float, default=2.0,
-                   help="start-up time left out of speed and error [s] (default 2)")
+    p.add_argument("--transient", type=float,
+                   help="start-up time left out of speed and error [s] (default 2, or half the "
+                        "episode if that is shorter)")
     p.add_argument("--max-steps", type=int, help="episode length in control steps (default: the id's)")
     p.add_argument("--env-config", metavar="YAML", help="YAML file of env keywords")
     p.add_argument("--env-kwarg", action="append", metavar="KEY=VALUE",
@@ -110,7 +111,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise CLIError(f"--episodes {args.episodes} must be at least 1")
-    if not (math.isfinite(args.transient) and args.transient >= 0):
+    if args.transient is not None and not (math.isfinite(args.transient) and args.transient >= 0):
         raise CLIError(f"--transient {args.transient:g} must be a number of seconds >= 0")
     if args.video:
         try:
@@ -127,11 +128,14 @@ def _evaluate(args: argparse.Namespace) -> int:
     env = make_eval_env(args.env_id, seed=args.seed, env_kwargs=env_kwargs,
                         render_mode="rgb_array" if args.video else None)
     inner = env.envs[0]
-    if inner.spec is not None and inner.spec.max_episode_steps:
-        try:
-            check_transient(args.transient, inner.spec.max_episode_steps * inner.unwrapped.dt)
-        except ValueError as err:
-            raise CLIError(f"--transient: {err}") from None
+    limit = inner.spec.max_episode_steps if inner.spec is not None else None
+    duration = limit * inner.unwrapped.dt if limit else math.inf
+    if args.transient is None:
+        args.transient = min(2.0, duration / 2)
+    try:
+        check_transient(args.transient, duration)
+    except ValueError as err:
+        raise CLIError(f"--transient: {err}") from None
     policy = make_policy(args.policy, env, config=args.policy_config)
     t0 = time.perf_counter()
     episodes = evaluate(policy, env, episodes=args.episodes, transient=args.transient, video=args.video)
