@@ -23,9 +23,13 @@ def test_numpy_scalars_are_accepted_and_stored_as_python_numbers():
     assert type(Integrator(substeps=np.int32(3)).substeps) is int
     cfg = from_dict(SimConfig, {"rod": {"N": np.uint8(5), "E": np.float32(1e6)}})
     assert type(cfg.rod.N) is int and type(cfg.rod.E) is float
-    env = gym.make("SoftEel-v0", rod={"N": np.int64(12), "E": np.float32(2e6)}, dt=np.float32(0.02),
-                   max_curvature_rate=np.float32(3.0),
-                   randomize={"E": [np.float32(1e6), np.int64(3_000_000)]})
+    env = gym.make(
+        "SoftEel-v0",
+        rod={"N": np.int64(12), "E": np.float32(2e6)},
+        dt=np.float32(0.02),
+        max_curvature_rate=np.float32(3.0),
+        randomize={"E": [np.float32(1e6), np.int64(3_000_000)]},
+    )
     s = env.unwrapped.settings
     assert env.unwrapped.N == 12 and type(s.max_curvature_rate) is float
     assert s.randomize.E == (1e6, 3e6) and all(type(v) is float for v in s.randomize.E)
@@ -171,15 +175,21 @@ def test_randomization_ranges_that_break_mu_d_le_mu_s_are_rejected():
         assert (cfg.ground.mu_s, cfg.ground.mu_d) == (drawn["mu_s"], drawn["mu_d"])
 
 
-@pytest.mark.parametrize("env_id,key,unused", [("SoftEel-v0", "mu_s", "ground"), ("SoftWorm-v0", "C_D", "fluid")])
+@pytest.mark.parametrize(
+    "env_id,key,unused", [("SoftEel-v0", "mu_s", "ground"), ("SoftWorm-v0", "C_D", "fluid")]
+)
 def test_randomizing_what_the_medium_ignores_is_rejected(env_id, key, unused):
-    with pytest.raises(ConfigError, match=rf"{env_id}.randomize: {key} has no effect .*\({unused} parameters\)"):
+    with pytest.raises(
+        ConfigError, match=rf"{env_id}.randomize: {key} has no effect .*\({unused} parameters\)"
+    ):
         gym.make(env_id, randomize={"E": [1e6, 2e6], key: [0.5, 0.6]})
 
 
 def test_symplectic_with_tens_of_thousands_of_substeps_warns():
     with pytest.warns(UserWarning, match=r"symplectic_euler' takes [\d,]+ sub-steps per h = 0.01 s"):
-        gym.make("SoftEel-v0", integrator={"method": "symplectic_euler"}, rod={"E": 2e10, "damping_bend": 0.1})
+        gym.make(
+            "SoftEel-v0", integrator={"method": "symplectic_euler"}, rod={"E": 2e10, "damping_bend": 0.1}
+        )
     import warnings
 
     with warnings.catch_warnings():
@@ -217,16 +227,20 @@ def test_evaluate_without_the_video_extra_fails_before_the_episode(monkeypatch, 
     import sys
 
     monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # as if the extra were not installed
-    err = _one_line_error(["evaluate", "SoftEel-v0", "--policy", "pid", "--video", str(tmp_path / "x.mp4")],
-                          capsys)
+    err = _one_line_error(
+        ["evaluate", "SoftEel-v0", "--policy", "pid", "--video", str(tmp_path / "x.mp4")], capsys
+    )
     assert "needs imageio with ffmpeg (pip install 'soft-snake-gym[video]'); or give a .gif path" in err
 
 
-@pytest.mark.parametrize("transient,message", [
-    ("20", "transient = 20 s is longer than half the 10 s episode"),
-    ("-1", "--transient -1 must be a number of seconds >= 0"),
-    ("nan", "--transient nan must be"),
-])
+@pytest.mark.parametrize(
+    "transient,message",
+    [
+        ("20", "transient = 20 s is longer than half the 10 s episode"),
+        ("-1", "--transient -1 must be a number of seconds >= 0"),
+        ("nan", "--transient nan must be"),
+    ],
+)
 def test_evaluate_rejects_a_transient_that_leaves_no_window(transient, message, capsys, no_work):
     err = _one_line_error(["evaluate", "SoftEel-v0", "--policy", "pid", "--transient", transient], capsys)
     assert message in err
@@ -236,9 +250,27 @@ def test_evaluate_header_says_when_episodes_were_too_short_for_the_transient(cap
     from soft_snake_gym.cli import main
 
     # a gait that folds the soft eel onto itself within 0.3 s
-    assert main(["evaluate", "SoftEel-v0", "--policy", "open-loop:alpha=2.5,omega=6", "--episodes", "2",
-                 "--env-kwarg", "max_curvature_rate=200", "--env-kwarg", "max_rest_curvature=10",
-                 "--max-steps", "300", "--transient", "1"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "SoftEel-v0",
+                "--policy",
+                "open-loop:alpha=2.5,omega=6",
+                "--episodes",
+                "2",
+                "--env-kwarg",
+                "max_curvature_rate=200",
+                "--env-kwarg",
+                "max_rest_curvature=10",
+                "--max-steps",
+                "300",
+                "--transient",
+                "1",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "metrics after a 1 s transient (over the whole episode for 2 of 2 that ended before 2 s)" in out
     assert "2 episode(s) ended in a failure: self_intersection" in out
@@ -247,31 +279,80 @@ def test_evaluate_header_says_when_episodes_were_too_short_for_the_transient(cap
 def test_evaluate_warns_when_a_baseline_gait_saturates_the_actions(capsys):
     from soft_snake_gym.cli import main
 
-    assert main(["evaluate", "SoftEel-v0", "--policy", "pid:alpha=3,omega=100", "--episodes", "1",
-                 "--max-steps", "10", "--transient", "0"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "SoftEel-v0",
+                "--policy",
+                "pid:alpha=3,omega=100",
+                "--episodes",
+                "1",
+                "--max-steps",
+                "10",
+                "--transient",
+                "0",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("soft-snake evaluate: warning: the alpha = 3 rad, omega = 100")
     assert "beyond the env's max_curvature_rate = 6.28 1/s" in err[0]
-    assert main(["evaluate", "SoftWorm-v0", "--policy", "inching:omega=20", "--episodes", "1",
-                 "--max-steps", "10", "--transient", "0"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "SoftWorm-v0",
+                "--policy",
+                "inching:omega=20",
+                "--episodes",
+                "1",
+                "--max-steps",
+                "10",
+                "--transient",
+                "0",
+            ]
+        )
+        == 0
+    )
     assert "beyond the env's max_length_rate = 0.3 m/s" in capsys.readouterr().err
-    assert main(["evaluate", "SoftEel-v0", "--policy", "pid", "--episodes", "1", "--max-steps", "10",
-                 "--transient", "0"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "SoftEel-v0",
+                "--policy",
+                "pid",
+                "--episodes",
+                "1",
+                "--max-steps",
+                "10",
+                "--transient",
+                "0",
+            ]
+        )
+        == 0
+    )
     assert capsys.readouterr().err == ""  # the default gait fits
 
 
 def test_compare_checks_the_chart_format_first(capsys, no_work, tmp_path):
-    err = _one_line_error(["compare", "SoftEel-v0", "--policies", "pid", "--out", str(tmp_path / "x.txt")],
-                          capsys)
+    err = _one_line_error(
+        ["compare", "SoftEel-v0", "--policies", "pid", "--out", str(tmp_path / "x.txt")], capsys
+    )
     assert "cannot draw a chart into" in err and ".png" in err
 
 
-@pytest.mark.parametrize("args,message", [
-    (["--alpha-max", "4"], "--alpha-max 4 must be below pi rad"),
-    (["--workers", "0"], "--workers 0 must be at least 1"),
-    (["--workers", "-3"], "--workers -3 must be at least 1"),
-    (["--out", "{file}"], "is a file; give a folder"),
-])
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--alpha-max", "4"], "--alpha-max 4 must be below pi rad"),
+        (["--workers", "0"], "--workers 0 must be at least 1"),
+        (["--workers", "-3"], "--workers -3 must be at least 1"),
+        (["--out", "{file}"], "is a file; give a folder"),
+    ],
+)
 def test_sweep_checks_its_arguments_first(args, message, capsys, no_work, tmp_path):
     file = tmp_path / "taken.csv"
     file.write_text("")
@@ -283,8 +364,21 @@ def test_sweep_checks_its_arguments_first(args, message, capsys, no_work, tmp_pa
 def test_sweep_exits_nonzero_when_cells_could_not_run(capsys, no_work, tmp_path):
     from soft_snake_gym.cli import main
 
-    code = main(["sweep", "swim-gait", "--no-progress", "--workers", "1", "--n-alpha", "1", "--n-omega", "1",
-                 "--out", str(tmp_path)])
+    code = main(
+        [
+            "sweep",
+            "swim-gait",
+            "--no-progress",
+            "--workers",
+            "1",
+            "--n-alpha",
+            "1",
+            "--n-omega",
+            "1",
+            "--out",
+            str(tmp_path),
+        ]
+    )
     assert code == 1
     err = capsys.readouterr().err
     assert "2 cells could not run" in err and "work started before" in err
@@ -302,9 +396,21 @@ def test_heatmap_axes_span_the_grid_cells_not_beyond(tmp_path, monkeypatch):
 
     np.testing.assert_allclose(cell_edges([0.15, 1.52]), [0.15, 0.835, 1.52])
     np.testing.assert_allclose(cell_edges([0.2, 0.4, 1.0]), [0.2, 0.3, 0.7, 1.0])  # uneven spacing
-    rows = [{"controller": c, "alpha": a, "omega": w, "E_bend": 1.87e4, "average_speed": a * w,
-             "curvature_error": 0.1, "mean_fluid_power": 1.0, "failure": ""}
-            for c in ("open-loop", "pid") for a in (0.15, 1.52) for w in (0.5, 3.1416)]
+    rows = [
+        {
+            "controller": c,
+            "alpha": a,
+            "omega": w,
+            "E_bend": 1.87e4,
+            "average_speed": a * w,
+            "curvature_error": 0.1,
+            "mean_fluid_power": 1.0,
+            "failure": "",
+        }
+        for c in ("open-loop", "pid")
+        for a in (0.15, 1.52)
+        for w in (0.5, 3.1416)
+    ]
     monkeypatch.setattr(plt, "close", lambda fig=None: None)  # keep the figures to inspect them
     plt.close("all")
     before = set(plt.get_fignums())
