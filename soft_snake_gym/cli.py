@@ -13,6 +13,7 @@ import json
 import math
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,8 +86,9 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policy-config", metavar="YAML", help="YAML file of the policy's gait/gains")
     p.add_argument("--episodes", type=int, default=3, help="number of episodes (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
-    p.add_argument("--transient", type=float, default=2.0,
-                   help="start-up time left out of speed and error [s] (default 2)")
+    p.add_argument("--transient", type=float,
+                   help="start-up time left out of speed and error [s] (default 2, or half the "
+                        "episode if that is shorter)")
     p.add_argument("--max-steps", type=int, help="episode length in control steps (default: the id's)")
     p.add_argument("--env-config", metavar="YAML", help="YAML file of env keywords")
     p.add_argument("--env-kwarg", action="append", metavar="KEY=VALUE",
@@ -100,13 +102,25 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
 
 @subcommand("evaluate", "evaluate a baseline or a trained model for K episodes", _evaluate_arguments)
 def _evaluate(args: argparse.Namespace) -> int:
-    from soft_snake_gym.evaluation import evaluate, format_table, make_eval_env, summarize
+    from soft_snake_gym.evaluation import (
+        check_transient,
+        check_video_path,
+        evaluate,
+        format_table,
+        make_eval_env,
+        summarize,
+    )
     from soft_snake_gym.policies import make_policy, policy_gait
 
     if args.episodes < 1:
         raise CLIError(f"--episodes {args.episodes} must be at least 1")
-    if args.video and Path(args.video).suffix.lower() not in (".mp4", ".gif"):
-        raise CLIError(f"--video {args.video!r} must end in .mp4 or .gif")
+    if args.transient is not None and not (math.isfinite(args.transient) and args.transient >= 0):
+        raise CLIError(f"--transient {args.transient:g} must be a number of seconds >= 0")
+    if args.video:
+        try:
+            check_video_path(args.video)
+        except ValueError as err:
+            raise CLIError(f"--video: {err}") from None
     env_kwargs = _parse_env_kwargs(args.env_kwarg)
     if args.start_on_gait:
         if "start_on_gait" in env_kwargs:
@@ -120,14 +134,29 @@ def _evaluate(args: argparse.Namespace) -> int:
         env_kwargs["max_episode_steps"] = args.max_steps
     env = make_eval_env(args.env_id, seed=args.seed, env_kwargs=env_kwargs,
                         render_mode="rgb_array" if args.video else None)
+    inner = env.envs[0]
+    limit = inner.spec.max_episode_steps if inner.spec is not None else None
+    duration = limit * inner.unwrapped.dt if limit else math.inf
+    if args.transient is None:
+        args.transient = min(2.0, duration / 2)
+    try:
+        check_transient(args.transient, duration)
+    except ValueError as err:
+        raise CLIError(f"--transient: {err}") from None
     policy = make_policy(args.policy, env, config=args.policy_config)
     t0 = time.perf_counter()
     episodes = evaluate(policy, env, episodes=args.episodes, transient=args.transient, video=args.video)
     elapsed = time.perf_counter() - t0
     summary = summarize(episodes)
+    whole = sum(e["window_start"] != args.transient for e in episodes)
+    window = f"metrics after a {args.transient:g} s transient"
+    if whole:
+        window += (f" (over the whole episode for {whole} of {len(episodes)} that ended before "
+                   f"{2 * args.transient:g} s)")
+    durations = sorted({round(e["duration"], 1) for e in episodes})
+    each = f"{durations[0]:.1f} s each" if len(durations) == 1 else f"{durations[0]:.1f}-{durations[-1]:.1f} s"
     title = (f"{args.env_id}  policy={args.policy}  episodes={args.episodes}  "
-             f"({episodes[0]['duration']:.1f} s each, metrics after a {args.transient:g} s transient; "
-             f"{elapsed:.1f} s wall)")
+             f"({each}, {window}; {elapsed:.1f} s wall)")
     print(format_table(summary, title))
     failures = [e["failure"] for e in episodes if e["failure"]]
     if failures:
@@ -158,9 +187,12 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every registered subcommand."""
+    from soft_snake_gym import __version__
+
     parser = _Parser(
         prog="soft-snake", description="Soft segmented robots: simulate, evaluate, sweep, reproduce."
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subs = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
     for sub in SUBCOMMANDS.values():
         p = subs.add_parser(sub.name, help=sub.help, description=sub.help)
@@ -188,6 +220,12 @@ def main(argv: list[str] | None = None) -> int:
     _load_subcommands()
     parser = build_parser()
     args = parser.parse_args(argv)
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        print(f"soft-snake {args._name}: warning: {message}", file=sys.stderr)
+
+    shown = warnings.showwarning
+    warnings.showwarning = one_line
     try:
         return int(args._run(args) or 0)
     except _user_errors() as err:
@@ -197,6 +235,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"soft-snake {args._name}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        warnings.showwarning = shown
 
 
 if __name__ == "__main__":  # python -m soft_snake_gym.cli: use the importable module's registry

@@ -86,6 +86,13 @@ def plot_comparison(results: dict[str, dict[str, tuple[float, float]]], path: st
     return path
 
 
+def _episodes_on_seeds(episodes: int, seed: int) -> str:
+    """``1 episode per policy, seed 0`` or ``10 episodes per policy, seeds 0..9``."""
+    if episodes == 1:
+        return f"1 episode per policy, seed {seed}"
+    return f"{episodes} episodes per policy, seeds {seed}..{seed + episodes - 1}"
+
+
 def _arguments(p) -> None:
     p.add_argument("env_id", nargs="?", default="SoftEel-v0", help="environment id (default SoftEel-v0)")
     p.add_argument("--policies", nargs="+", metavar="SPEC",
@@ -97,16 +104,37 @@ def _arguments(p) -> None:
     p.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
 
 
+def check_figure_path(path: str | Path) -> None:
+    """Raise ``ValueError`` unless matplotlib can write a figure at ``path`` (by its suffix)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in formats:
+        raise ValueError(
+            f"cannot draw a chart into {str(path)!r}: give a name ending in one of "
+            f"{', '.join('.' + f for f in sorted(formats))} (the table is printed on stdout)"
+        )
+    if Path(path).is_dir():
+        raise ValueError(f"{str(path)!r} is a folder; give the chart's file name")
+
+
 def _run(args) -> int:
     from soft_snake_gym.cli import CLIError
 
     if args.episodes < 1:
         raise CLIError(f"--episodes {args.episodes} must be at least 1")
+    try:
+        check_figure_path(args.out or f"compare_{args.env_id}.png")
+    except ValueError as err:
+        raise CLIError(f"--out: {err}") from None
+    if args.json and Path(args.json).is_dir():
+        raise CLIError(f"--json {args.json!r} is a folder; give a file name")
     specs = args.policies or DEFAULT_POLICIES.get(args.env_id)
     if not specs:
         raise CLIError(f"give --policies for {args.env_id} (defaults exist for {', '.join(DEFAULT_POLICIES)})")
     results = compare(args.env_id, specs, args.episodes, args.seed)
-    title = f"{args.env_id}: {args.episodes} episodes per policy, seeds {args.seed}..{args.seed + args.episodes - 1}"
+    title = f"{args.env_id}: {_episodes_on_seeds(args.episodes, args.seed)}"
     print(format_comparison(results, title))
     out = plot_comparison(results, args.out or f"compare_{args.env_id}.png", title)
     print(f"wrote {out}")

@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 
 import yaml
 
-from soft_snake_gym.params import SimConfig
+from soft_snake_gym.params import SimConfig, plain_number
 
 __all__ = [
     "ConfigError",
@@ -42,7 +42,23 @@ class ConfigError(ValueError):
 
 
 class _Loader(yaml.SafeLoader):
-    """SafeLoader that also reads ``1e6`` and ``2e-3`` as floats (YAML 1.1 wants ``1.0e+6``)."""
+    """SafeLoader that also reads ``1e6`` and ``2e-3`` as floats (YAML 1.1 wants ``1.0e+6``)
+    and refuses a key given twice in one mapping (PyYAML would keep the last silently)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen: dict[Any, Any] = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                first = seen.setdefault(key, key_node.start_mark)
+            except TypeError:  # an unhashable key: PyYAML's own error follows
+                continue
+            if first is not key_node.start_mark:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r} (first given on line {first.line + 1})",
+                    key_node.start_mark,
+                )
+        return super().construct_mapping(node, deep=deep)
 
 
 _Loader.add_implicit_resolver(
@@ -66,6 +82,8 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
         ConfigError: the file is missing, is not valid YAML, or is not a mapping.
     """
     path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"config file {str(path)!r} is a folder; give the path of a YAML file")
     if not path.is_file():
         raise ConfigError(f"config file {str(path)!r} does not exist; check the path")
     try:
@@ -91,7 +109,7 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
 
 def _unknown_key_message(where: str, key: str, valid: list[str]) -> str:
     close = difflib.get_close_matches(str(key), valid, n=1)
-    hint = f"; did you mean {close[0]!r}?" if close else ""
+    hint = f"; did you mean {close[0]!r}?" if close else "."
     return f"unknown key {key!r} in {where}{hint} Valid keys: {', '.join(valid)}"
 
 
@@ -118,13 +136,15 @@ def _coerce(value: Any, hint: Any, where: str) -> Any:
             raise ConfigError(f"{where} = {value!r} must be one of {list(allowed)}")
         return value
     if hint is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
+        number = plain_number(value)
+        if number is None:
             raise ConfigError(f"{where} = {value!r} must be a number")
-        return float(value)
+        return float(number)
     if hint is int:
-        if isinstance(value, bool) or not isinstance(value, int):
+        number = plain_number(value, integer=True)
+        if number is None:
             raise ConfigError(f"{where} = {value!r} must be an integer")
-        return value
+        return number
     if hint is bool:
         if not isinstance(value, bool):
             raise ConfigError(f"{where} = {value!r} must be true or false")
@@ -162,11 +182,28 @@ def from_dict(cls: type[T], data: Any, where: str | None = None) -> T:
     for key, value in data.items():
         if key not in valid and key not in retired:  # a retired key's own check explains it
             raise ConfigError(_unknown_key_message(where, key, valid))
-        kwargs[key] = _coerce(value, hints[key], f"{where}.{key}")
+        try:
+            kwargs[key] = _coerce(value, hints[key], f"{where}.{key}")
+        except ConfigError as err:
+            raise ConfigError(_with_range(cls, key, value, where) or str(err)) from None
     try:
         return cls(**kwargs)
     except ValueError as err:
         raise ConfigError(str(err)) from None
+
+
+def _with_range(cls: type, key: str, value: Any, where: str) -> str | None:
+    """The dataclass's own message for a value of the wrong type, which names the allowed
+    range (``Rod.E = 'abc' must be a number in (0.0, inf)``), under the name ``where.key``;
+    None if the class has no check of its own for ``key``."""
+    try:
+        cls(**{key: value})
+    except (ValueError, TypeError) as err:
+        own = f"{cls.__name__}.{key} = "
+        message = str(err)
+        if message.startswith(own):
+            return f"{where}.{key} = {message[len(own):]}"
+    return None
 
 
 def to_dict(obj: Any) -> dict[str, Any]:

@@ -17,12 +17,15 @@ Per episode:
   ``window_fluid_power`` [W] (mean over the same window as the speed), ``energy_friction`` [J]
   on land;
 - ``energy_actuator`` [J] and ``cost_of_transport`` [-] (the env's, MODEL.md §8);
-- ``failure``: the env's failure reason, or "".
+- ``failure``: the env's failure reason, or "";
+- ``window_start`` [s]: where the speed and error window began: ``transient``, or 0 for an
+  episode shorter than twice that (a failure), whose whole length is used.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +33,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["EpisodeRecorder", "evaluate", "make_eval_env", "summarize", "format_table", "COLUMNS"]
+__all__ = ["EpisodeRecorder", "evaluate", "make_eval_env", "summarize", "format_table", "COLUMNS",
+           "check_video_path", "check_transient", "gait_rate_warning"]
 
 VIDEO_FPS = 25
 """Frames per second of ``--video`` (the env renders only the frames kept)."""
@@ -170,6 +174,7 @@ class EpisodeRecorder:
             "return": run.ret,
             "steps": run.steps,
             "duration": duration,
+            "window_start": self.transient if use_window else 0.0,
             "average_speed": speed,
             "com_speed": com_speed,
             "distance": float(m.get("distance", math.nan)),
@@ -209,7 +214,14 @@ def evaluate(
     """
     from stable_baselines3.common.evaluation import evaluate_policy
 
+    if not (isinstance(transient, (int, float)) and math.isfinite(transient) and transient >= 0):
+        raise ValueError(f"transient = {transient!r} s must be a finite number >= 0")
+    if video is not None:
+        check_video_path(video)
     inner = env.envs[0].unwrapped
+    warning = gait_rate_warning(policy, env)
+    if warning:
+        warnings.warn(warning, stacklevel=2)
     error_key = "curvature_error" if inner.medium == "water" else "length_error"
     frames: list[np.ndarray] = []
     stride = max(1, int(round(1.0 / (VIDEO_FPS * inner.dt))))  # render only the frames kept
@@ -242,6 +254,64 @@ def evaluate(
     if video is not None:
         write_video(frames, video, fps=round(1.0 / (stride * inner.dt)))
     return rec.episodes
+
+
+def check_video_path(path: str | Path) -> None:
+    """Raise ``ValueError`` unless a video can be written at ``path``: a ``.gif`` (Pillow), or an
+    ``.mp4`` with imageio and its ffmpeg plugin installed (the ``video`` extra). Call it before
+    running episodes, so a missing dependency fails at once."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".mp4", ".gif"):
+        raise ValueError(f"video path {str(path)!r} must end in .mp4 or .gif")
+    if suffix == ".mp4":
+        try:
+            import imageio.v2  # noqa: F401
+            import imageio_ffmpeg  # noqa: F401
+        except ImportError:
+            raise ValueError(
+                f"writing {Path(path).name} needs imageio with ffmpeg (pip install "
+                "'soft-snake-gym[video]'); or give a .gif path"
+            ) from None
+
+
+def check_transient(transient: float, duration: float) -> None:
+    """Raise ``ValueError`` unless ``transient`` [s] leaves an averaging window in an episode of
+    ``duration`` [s]: speed and error are averaged after the transient only when the episode
+    lasts at least twice as long (otherwise over the whole episode)."""
+    if not (isinstance(transient, (int, float)) and math.isfinite(transient) and transient >= 0):
+        raise ValueError(f"transient = {transient!r} s must be a finite number >= 0")
+    if 2 * transient > duration + 1e-9:
+        raise ValueError(
+            f"transient = {transient:g} s is longer than half the {duration:g} s episode, so no "
+            f"metrics would be taken after it; give at most {duration / 2:g} s or a longer episode"
+        )
+
+
+def gait_rate_warning(policy: Any, env: Any) -> str | None:
+    """A warning if a baseline's gait asks for input rates beyond the env's action scale
+    (``max_curvature_rate`` or ``max_length_rate``): the actions saturate and the gait is not
+    the one named. None when the gait fits or the policy has no gait (a trained agent)."""
+    params = getattr(policy, "params", None)
+    inner = env.envs[0].unwrapped if hasattr(env, "envs") else getattr(env, "unwrapped", env)
+    omega = getattr(params, "omega", None)
+    if omega is None:
+        return None
+    if hasattr(params, "alpha") and hasattr(inner, "max_curvature_rate"):
+        alpha = params.alpha
+        peak = alpha * omega / math.cos(alpha / 2) ** 2  # max of d/dt 2 tan(alpha sin(psi) / 2)
+        limit, name, unit = inner.max_curvature_rate, "max_curvature_rate", "1/s"
+        gait = f"alpha = {alpha:g} rad, omega = {omega:g} rad/s"
+    elif hasattr(params, "eps") and hasattr(inner, "max_length_rate"):
+        peak = 0.5 * inner.base_config.rod.edge_length * params.eps * omega
+        limit, name, unit = inner.max_length_rate, "max_length_rate", "m/s"
+        gait = f"eps = {params.eps:g}, omega = {omega:g} rad/s"
+    else:
+        return None
+    if peak <= limit * (1 + 1e-9):
+        return None
+    return (f"the {gait} gait needs input rates up to {peak:.3g} {unit}, beyond the env's {name} = "
+            f"{limit:.3g} {unit}: the actions saturate and the robot does not follow the gait; "
+            f"raise {name} (--env-kwarg {name}={peak * 1.05:.3g}) or slow the gait")
 
 
 def write_video(frames: list[np.ndarray], path: str | Path, fps: int = 50, stride: int = 1) -> Path:

@@ -32,6 +32,17 @@ _AXIS = {
 }
 
 
+def cell_edges(values: np.ndarray) -> np.ndarray:
+    """Edges (n + 1,) of the heatmap cells of sorted grid values (n,): halfway between
+    neighbours, and at the first and last value, so the axes span the grid and no more (a
+    value on the border owns the half cell inside it). One value gets a cell of ±5 %."""
+    values = np.asarray(values, dtype=float)
+    if values.size == 1:
+        half = 0.05 * abs(values[0]) or 0.5
+        return np.array([values[0] - half, values[0] + half])
+    return np.concatenate([values[:1], (values[1:] + values[:-1]) / 2, values[-1:]])
+
+
 def sweep_heatmaps(study: Any, rows: list[dict[str, Any]], out_dir: str | Path) -> list[Path]:
     """One PNG per metric of ``study`` (a :class:`~soft_snake_gym.sweep.Study`), one panel per
     controller (or per bending modulus), cells annotated with their values."""
@@ -66,26 +77,21 @@ def sweep_heatmaps(study: Any, rows: list[dict[str, Any]], out_dir: str | Path) 
         fig, axes = plt.subplots(
             1, len(panels), figsize=(4.2 * len(panels) + 0.8, 3.8), squeeze=False, constrained_layout=True
         )
-        dx = (xs[1] - xs[0]) / 2 if xs.size > 1 else 0.5
-        dy = (ys[1] - ys[0]) / 2 if ys.size > 1 else 0.5
+        xe, ye = cell_edges(xs), cell_edges(ys)
+        xc, yc = (xe[1:] + xe[:-1]) / 2, (ye[1:] + ye[:-1]) / 2  # centres of the drawn cells
         for ax, panel, z in zip(axes[0], panels, grids, strict=True):
-            im = ax.imshow(
-                np.ma.masked_invalid(z),
-                origin="lower",
-                aspect="auto",
-                cmap="viridis",
-                vmin=vmin,
-                vmax=vmax,
-                extent=(xs[0] - dx, xs[-1] + dx, ys[0] - dy, ys[-1] + dy),
-            )
+            im = ax.pcolormesh(xe, ye, np.ma.masked_invalid(z), cmap="viridis", vmin=vmin, vmax=vmax)
+            for values, axis in ((xs, ax.xaxis), (ys, ax.yaxis)):
+                if values.size <= 8:  # tick the grid's own values
+                    axis.set_ticks(values, [f"{v:.3g}" for v in values])
             if z.size <= 100:
                 for iy, y in enumerate(ys):
                     for ix, x in enumerate(xs):
                         if np.isfinite(z[iy, ix]):
                             v = z[iy, ix]
                             ax.text(
-                                x,
-                                y,
+                                xc[ix],
+                                yc[iy],
                                 f"{v:.3g}",
                                 ha="center",
                                 va="center",
@@ -93,7 +99,7 @@ def sweep_heatmaps(study: Any, rows: list[dict[str, Any]], out_dir: str | Path) 
                                 color="white" if v < (vmin + vmax) / 2 else "black",
                             )
                         elif any(r[panel_key] == panel and r[xk] == x and r[yk] == y for r in rows):
-                            ax.text(x, y, "fail", ha="center", va="center", fontsize=6, color="red")
+                            ax.text(xc[ix], yc[iy], "fail", ha="center", va="center", fontsize=6, color="red")
             name = f"E_bend = {panel:.3g} Pa" if panel_key == "E_bend" else str(panel)
             ax.set_title(name)
             ax.set_xlabel(f"{_AXIS[xk][0]} [{_AXIS[xk][1]}]")

@@ -9,12 +9,27 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from dataclasses import InitVar, dataclass, fields
-from typing import Literal
+from typing import Any, Literal
 
-__all__ = ["Rod", "Fluid", "Ground", "Integrator", "SimConfig", "Medium"]
+__all__ = ["Rod", "Fluid", "Ground", "Integrator", "SimConfig", "Medium", "plain_number"]
 
 Medium = Literal["water", "ground", "none"]
+
+
+def plain_number(value: Any, integer: bool = False) -> int | float | None:
+    """``value`` as a Python ``int`` or ``float`` if it is a real number (including numpy
+    scalars such as ``np.int64`` and ``np.float32``), else None. Booleans are not numbers.
+    With ``integer``, only integers (Python or numpy) qualify.
+
+    Frozen configs keep the Python number, so they stay hashable and YAML-dumpable.
+    """
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return None
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    return None if integer else float(value)
 
 
 def _check(owner: object, name: str, lo: float | None = None, hi: float | None = None,
@@ -22,11 +37,14 @@ def _check(owner: object, name: str, lo: float | None = None, hi: float | None =
     """Raise ``ValueError`` unless ``owner.name`` is a finite number within [lo, hi]."""
     value = getattr(owner, name)
     cls = type(owner).__name__
-    left = "(" if lo_open else "["
-    right = ")" if hi_open else "]"
+    left = "(" if lo_open or lo is None else "["
+    right = ")" if hi_open or hi is None else "]"
     allowed = f"{left}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{right}"
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    number = plain_number(value)
+    if number is None:
         raise ValueError(f"{cls}.{name} = {value!r} must be a number in {allowed}")
+    if type(number) is not type(value):  # a numpy scalar: keep the Python number
+        object.__setattr__(owner, name, number)
     bad = not math.isfinite(value)
     if lo is not None:
         bad |= value <= lo if lo_open else value < lo
@@ -40,10 +58,11 @@ def _check_int(owner: object, name: str, lo: int, hi: int | None = None) -> None
     value = getattr(owner, name)
     cls = type(owner).__name__
     allowed = f"[{lo}, {'inf' if hi is None else hi}]"
-    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (
-        hi is not None and value > hi
-    ):
+    number = plain_number(value, integer=True)
+    if number is None or number < lo or (hi is not None and number > hi):
         raise ValueError(f"{cls}.{name} = {value!r} must be an integer in {allowed}")
+    if type(number) is not type(value):  # a numpy integer: keep the Python int
+        object.__setattr__(owner, name, number)
 
 
 @dataclass(frozen=True)
@@ -62,7 +81,9 @@ class Rod:
     them onto arc length; the envs scale their per-node action bounds by ``edge_ratio``).
 
     Attributes:
-        N: number of nodes (>= 3); the head is node N-1.
+        N: number of nodes (>= 3); the head is node N-1. More nodes add edges of the same
+            ``edge_length`` and ``edge_mass``: a longer, heavier robot, not a finer model of
+            the same one (N = 300 is a 53.8 m body).
         edge_length: rest length of every edge at rest, ``lbar`` at t = 0 [m].
         edge_mass: mass of every edge [kg]; node masses are lumped from it.
         a: half-height of the cross-section, out of the plane [m].
@@ -192,10 +213,10 @@ class Fluid:
     """Water at rest, Morison-type drag and normal added mass (MODEL.md §4).
 
     Attributes:
-        rho: density [kg/m^3].
-        C_f: tangential (skin friction) drag coefficient [-].
-        C_D: normal drag coefficient [-].
-        C_A: normal added-mass coefficient [-].
+        rho: density of the water [kg/m^3].
+        C_f: tangential (skin friction) drag coefficient [-], on the edge's surface.
+        C_D: normal drag coefficient [-], on the edge's projected area.
+        C_A: normal added-mass coefficient [-], times the water displaced by the edge.
         added_mass: ``"consistent"`` (default): the Lagrangian force of the water's kinetic
             energy ``T_f``, which exchanges energy with the body without creating any;
             ``"kelasidi"``: the sources' acceleration term alone, which does net work on
@@ -228,10 +249,12 @@ class Ground:
     (``F_N = m_i g``) and otherwise slides with kinetic friction against its end velocity.
 
     Attributes:
-        mu_s: static friction coefficient [-].
-        mu_d: kinetic friction coefficient [-], at most ``mu_s``.
+        mu_s: static friction coefficient [-]: a node ends a step at rest while the force
+            needed to hold it is at most ``mu_s m g``.
+        mu_d: kinetic (dynamic) friction coefficient [-], ``0 <= mu_d <= mu_s``: a sliding node
+            feels ``mu_d m g`` against its velocity.
         V_tol: a node that ends a step slower than this sticks [m/s].
-        g: gravity [m/s^2].
+        g: gravitational acceleration [m/s^2].
         mu_forward: anisotropic option: kinetic coefficient for sliding toward the head along
             the body's local tangent [-]; ``None`` (default): ``mu_d``.
         mu_backward: the same for sliding toward the tail [-]; ``None``: ``mu_d``.

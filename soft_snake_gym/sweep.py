@@ -27,6 +27,7 @@ import argparse
 import csv
 import math
 import os
+import sys
 import time
 from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -287,6 +288,8 @@ def run_sweep(
 
     if study_name not in STUDIES:
         raise CLIError(f"unknown study {study_name!r}; choose one of {', '.join(STUDIES)} or 'all'")
+    if workers is not None and workers < 1:
+        raise CLIError(f"workers = {workers} must be at least 1 (or None: every local core)")
     study = STUDIES[study_name]
     grid = grid or StudyGrid()
     out_dir = Path(out_dir)
@@ -425,6 +428,17 @@ def grid_from_args(args: argparse.Namespace) -> StudyGrid:
         raise CLIError(f"friction needs 0 <= --mu-min <= --mu-max, got {grid.mu_s_min}, {grid.mu_s_max}")
     if any(e <= 0 for e in grid.e_bend):
         raise CLIError(f"--e-bend values must be > 0 Pa, got {list(grid.e_bend)}")
+    top = grid.alphas()[-1]
+    if top >= math.pi:
+        raise CLIError(
+            f"--alpha-max {top:g} must be below pi rad (a serpenoid's amplitude; the body "
+            "self-intersects from about 1.6 rad)"
+        )
+    if grid.inch_duration <= 2 * grid.inch_transient:
+        raise CLIError(
+            f"--inch-duration {grid.inch_duration:g} must exceed twice the {grid.inch_transient:g} s "
+            "transient the metrics leave out"
+        )
     return grid
 
 
@@ -439,11 +453,22 @@ def _sweep_arguments(p: argparse.ArgumentParser) -> None:
 @subcommand("sweep", "run (or resume) the thesis's parameter studies: CSV + heatmaps", _sweep_arguments)
 def _sweep(args: argparse.Namespace) -> int:
     grid = grid_from_args(args)
+    if args.workers is not None and args.workers < 1:
+        raise CLIError(f"--workers {args.workers} must be at least 1")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out {args.out!r} is a file; give a folder for the CSV and heatmaps")
     names: Iterable[str] = STUDIES if args.study == "all" else [args.study]
+    errors = 0
     for name in names:
         res = run_sweep(name, args.out, grid, workers=args.workers, progress=not args.no_progress)
         print(
             f"{name}: {res['computed']} cells computed, {res['skipped']} resumed from {res['csv']} "
             f"in {res['seconds']:.1f} s; figures: {', '.join(str(p) for p in res['figures'])}"
         )
-    return 0
+        bad = [r for r in read_results(res["csv"]).values() if str(r.get("failure", "")).startswith("error:")]
+        if bad:
+            errors += len(bad)
+            print(f"{name}: {len(bad)} cells could not run, e.g. {bad[0]['key']}: {bad[0]['failure']} "
+                  f"(failure column of {res['csv']})", file=sys.stderr)
+    return 1 if errors else 0

@@ -21,6 +21,7 @@ algorithm's own keyword arguments); nothing is ``eval``'d, and unknown keys are 
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import difflib
@@ -29,8 +30,10 @@ import json
 import math
 import platform
 import shlex
+import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,7 +42,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from soft_snake_gym.config import ConfigError, load_yaml
+from soft_snake_gym.config import ConfigError, _Loader, load_yaml
+from soft_snake_gym.params import plain_number
 
 __all__ = [
     "zoo_path",
@@ -103,14 +107,12 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.algo not in ALGOS:
             raise ConfigError(f"algo = {self.algo!r} is not supported; use one of {', '.join(ALGOS)}")
-        for name in ("n_envs", "n_timesteps", "eval_episodes"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ConfigError(f"{name} = {value!r} must be a positive integer")
-        for name in ("eval_freq", "checkpoint_freq", "seed", "eval_seed"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ConfigError(f"{name} = {value!r} must be an integer >= 0")
+        for name, lo in (("n_envs", 1), ("n_timesteps", 1), ("eval_episodes", 1), ("eval_freq", 0),
+                         ("checkpoint_freq", 0), ("seed", 0), ("eval_seed", 0)):
+            value = plain_number(getattr(self, name), integer=True)
+            if value is None or value < lo:
+                raise ConfigError(f"{name} = {getattr(self, name)!r} must be an integer >= {lo}")
+            object.__setattr__(self, name, value)
         if self.vec_env not in ("dummy", "subproc", "batched"):
             raise ConfigError(f"vec_env = {self.vec_env!r} must be 'dummy', 'subproc' or 'batched'")
         if not isinstance(self.normalize, bool):
@@ -146,6 +148,38 @@ def _algo_class(algo: str):
     return getattr(sb3, algo)
 
 
+#: Allowed values of the documented hyperparameters: name -> (low, high, low open, integer,
+#: meaning); ``None`` is unbounded.
+HYPER_RANGES: dict[str, tuple[float | None, float | None, bool, bool, str]] = {
+    "learning_rate": (0.0, None, True, False, "the optimizer's step size"),
+    "gamma": (0.0, 1.0, False, False, "the discount factor"),
+    "gae_lambda": (0.0, 1.0, False, False, "the GAE factor"),
+    "clip_range": (0.0, None, True, False, "PPO's clipping of the policy ratio"),
+    "ent_coef": (0.0, None, False, False, "the entropy bonus weight"),
+    "vf_coef": (0.0, None, False, False, "the value loss weight"),
+    "max_grad_norm": (0.0, None, True, False, "the gradient clipping norm"),
+    "n_steps": (1, None, False, True, "steps per env per rollout"),
+    "batch_size": (2, None, False, True, "the minibatch size"),
+    "n_epochs": (1, None, False, True, "passes over each rollout"),
+    "tau": (0.0, 1.0, True, False, "SAC's target update rate"),
+    "buffer_size": (1, None, False, True, "the replay buffer size"),
+    "learning_starts": (0, None, False, True, "steps before SAC learns"),
+    "train_freq": (1, None, False, True, "steps between SAC updates"),
+}
+
+
+def _check_range(key: str, value: Any) -> None:
+    """Raise ``ConfigError`` unless hyperparameter ``key`` is within :data:`HYPER_RANGES`."""
+    lo, hi, lo_open, integer, meaning = HYPER_RANGES[key]
+    number = plain_number(value, integer=integer)
+    allowed = f"{'(' if lo_open else '['}{lo}, {'inf)' if hi is None else f'{hi}]'}"
+    kind = "an integer" if integer else "a number"
+    if number is None or not math.isfinite(number) or (number <= lo if lo_open else number < lo) or (
+        hi is not None and number > hi
+    ):
+        raise ConfigError(f"hyperparameter {key} = {value!r} must be {kind} in {allowed} ({meaning})")
+
+
 def _check_hyperparams(algo: str, hyper: dict[str, Any]) -> None:
     params = inspect.signature(_algo_class(algo).__init__).parameters
     reserved = {"self", "policy", "env", "policy_kwargs", "seed", "tensorboard_log", "verbose",
@@ -160,6 +194,13 @@ def _check_hyperparams(algo: str, hyper: dict[str, Any]) -> None:
             raise ConfigError(
                 f"hyperparameter {key} = {value!r} is a string; give a number (schedules and "
                 "code are not evaluated from YAML)"
+            )
+        if key in HYPER_RANGES:
+            _check_range(key, value)
+        elif key == "gradient_steps" and (plain_number(value, integer=True) is None or value == 0 or value < -1):
+            raise ConfigError(
+                f"hyperparameter gradient_steps = {value!r} must be an integer >= 1, or -1 (as many as "
+                "steps collected)"
             )
 
 
@@ -358,15 +399,17 @@ def _make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start
     from soft_snake_gym.policies import make_policy
 
     class Checkpoint(BaseCallback):
-        """Model and VecNormalize statistics every ``checkpoint_freq`` environment steps."""
+        """Model and VecNormalize statistics at every multiple of ``checkpoint_freq``
+        environment steps (counted from the run's start, so a resumed run keeps the grid;
+        the first step at or past the multiple when ``n_envs`` does not divide it)."""
 
-        def __init__(self):
-            super().__init__()
-            self.last = 0
+        def _on_training_start(self) -> None:
+            self.last = self.num_timesteps
 
         def _on_step(self) -> bool:
-            if cfg.checkpoint_freq and self.num_timesteps - self.last >= cfg.checkpoint_freq:
-                save_checkpoint(self.model, run_dir)
+            freq = cfg.checkpoint_freq
+            if freq and self.num_timesteps // freq > self.last // freq:
+                save_checkpoint(self.model, run_dir, started)
                 self.last = self.num_timesteps
             return True
 
@@ -380,6 +423,8 @@ def _make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start
             self.best = -math.inf
             self.baseline: dict[str, tuple[float, float]] | None = None
             self.env = make_eval_env(cfg.env_id, n_envs=1, seed=cfg.eval_seed, env_kwargs=cfg.env_kwargs)
+            spec = cfg.baseline_spec  # made now, so a bad spec fails before any training
+            self.baseline_policy = make_policy(spec, self.env) if spec is not None and cfg.eval_freq else None
             self.csv = run_dir / "learning_curve.csv"
             if self.csv.is_file():  # resumed: keep the best so far and the baseline line
                 with open(self.csv) as fh:
@@ -393,11 +438,12 @@ def _make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start
             return summarize(evaluate(policy, self.env, episodes=cfg.eval_episodes))
 
         def _on_step(self) -> bool:
-            if not cfg.eval_freq or (self.last >= 0 and self.num_timesteps - self.last < cfg.eval_freq):
+            freq = cfg.eval_freq
+            if not freq or (self.last >= 0 and self.num_timesteps // freq <= self.last // freq):
                 return True
             self.last = self.num_timesteps
-            if self.baseline is None and cfg.baseline_spec is not None:
-                self.baseline = self._score(make_policy(cfg.baseline_spec, self.env))
+            if self.baseline is None and self.baseline_policy is not None:
+                self.baseline = self._score(self.baseline_policy)
             vn = self.model.get_vec_normalize_env()
             agent = TrainedPolicy(self.model, vn.obs_rms if vn is not None else None,
                                   vn.clip_obs if vn is not None else 10.0)
@@ -430,8 +476,10 @@ def _make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start
     return CallbackList([Checkpoint(), BaselineEval()])
 
 
-def save_checkpoint(model, run_dir: Path) -> Path:
-    """Save the model and its VecNormalize statistics under ``checkpoints/``."""
+def save_checkpoint(model, run_dir: Path, started: float | None = None) -> Path:
+    """Save the model and its VecNormalize statistics under ``checkpoints/``; with
+    ``started`` (the run's ``time.time()`` origin) also the wall time so far, so that a
+    resumed run's learning curve continues the clock (``checkpoints/wall_s.json``)."""
     ckdir = run_dir / "checkpoints"
     ckdir.mkdir(parents=True, exist_ok=True)
     steps = model.num_timesteps
@@ -440,38 +488,146 @@ def save_checkpoint(model, run_dir: Path) -> Path:
     vn = model.get_vec_normalize_env()
     if vn is not None:
         vn.save(str(ckdir / f"vecnormalize_{steps}_steps.pkl"))
+    if started is not None:
+        walls = _checkpoint_walls(run_dir)
+        walls[str(steps)] = round(time.time() - started, 1)
+        (ckdir / "wall_s.json").write_text(json.dumps(walls, indent=1) + "\n")
     return path
 
 
-# --- the run --------------------------------------------------------------------------------
-def _git_commit() -> str | None:
+def _checkpoint_walls(run_dir: Path) -> dict[str, float]:
+    """Training wall time [s] at each checkpoint, by step count."""
+    path = run_dir / "checkpoints" / "wall_s.json"
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def steps_per_iteration(cfg: TrainConfig) -> int:
+    """Environment steps SB3 takes between two checks of the total: a whole rollout of
+    ``n_steps x n_envs`` for PPO, ``train_freq x n_envs`` for SAC. ``learn`` stops at the first
+    multiple of this at or past the total asked for."""
+    defaults = inspect.signature(_algo_class(cfg.algo).__init__).parameters
+    key = "n_steps" if cfg.algo == "PPO" else "train_freq"
+    per_env = cfg.hyperparams.get(key, defaults[key].default)
+    return int(per_env if isinstance(per_env, int) else 1) * cfg.n_envs
+
+
+def planned_steps(cfg: TrainConfig, start: int = 0) -> int:
+    """The step count a run reaches when it trains from ``start`` towards ``cfg.n_timesteps``:
+    ``n_timesteps`` rounded up to whole iterations (:func:`steps_per_iteration`) counted from
+    ``start``; ``start`` itself if it is already there."""
+    chunk = steps_per_iteration(cfg)
+    remaining = cfg.n_timesteps - start
+    return start + (-(-remaining // chunk) * chunk if remaining > 0 else 0)
+
+
+class Terminated(KeyboardInterrupt):
+    """Training stopped by SIGTERM (a scheduler or ``kill``): handled as Ctrl-C, a checkpoint
+    is saved first."""
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt():
+    """Within the block, SIGTERM raises :class:`Terminated` (once; a repeat is ignored while
+    the checkpoint is written). Outside the main thread, signals stay as they are."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise Terminated(f"stopped by signal {signal.Signals(signum).name}")
+
+    previous = signal.signal(signal.SIGTERM, handler)
     try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5,
-                             cwd=Path(__file__).resolve().parent)
-        return out.stdout.strip() or None if out.returncode == 0 else None
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+# --- the run --------------------------------------------------------------------------------
+NO_CHECKOUT = "none: the package is not a git checkout (an installed copy); see soft_snake_gym's version"
+
+
+def _git_commit(package_dir: Path | None = None) -> str:
+    """The commit of the git checkout the package runs from, or :data:`NO_CHECKOUT` when it
+    runs from an installed copy (``pip install .``) or git is missing. A checkout counts only
+    if it tracks the package itself, not merely encloses it (a venv inside another repo)."""
+    where = package_dir or Path(__file__).resolve().parent
+    try:
+        tracked = subprocess.run(["git", "ls-files", "--error-unmatch", "__init__.py"], cwd=where,
+                                 capture_output=True, text=True, timeout=5)
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=where, capture_output=True, text=True,
+                              timeout=5)
     except (OSError, subprocess.SubprocessError):
-        return None
+        return NO_CHECKOUT
+    if tracked.returncode != 0 or head.returncode != 0 or not head.stdout.strip():
+        return NO_CHECKOUT
+    return head.stdout.strip()
+
+
+def _is_new_stage(cfg: TrainConfig, run_dir: Path) -> bool:
+    """True if ``cfg`` changes settings other than ``n_timesteps`` of the run's config.yaml."""
+    path = run_dir / "config.yaml"
+
+    def settings(data: dict[str, Any]) -> dict[str, Any]:
+        return {k: v for k, v in next(iter(data.values())).items() if k != "n_timesteps"}
+
+    return path.is_file() and settings(load_yaml(path)) != settings(cfg.to_yaml_dict())
 
 
 def _record_resume(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> bool:
     """Append the resuming command to command.txt. If settings other than ``n_timesteps``
     changed (a curriculum: ``--resume DIR --hyperparams ...``), keep the earlier config.yaml
     as config.<k>.yaml and return True: a new stage begins."""
-    with open(run_dir / "command.txt", "a") as fh:
-        fh.write(shlex.join(command if command is not None else sys.argv) + "\n")
     path = run_dir / "config.yaml"
-
-    def settings(data: dict[str, Any]) -> dict[str, Any]:
-        return {k: v for k, v in next(iter(data.values())).items() if k != "n_timesteps"}
-
-    new_stage = path.is_file() and settings(load_yaml(path)) != settings(cfg.to_yaml_dict())
+    new_stage = _is_new_stage(cfg, run_dir)
     if new_stage:
         k = 1
         while (run_dir / f"config.{k}.yaml").exists():
             k += 1
         path.rename(run_dir / f"config.{k}.yaml")
     path.write_text(yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False))
+    with open(run_dir / "command.txt", "a") as fh:
+        fh.write(shlex.join(command if command is not None else sys.argv) + "\n")
     return new_stage
+
+
+#: The files a run writes: a folder holding only these and no checkpoint may be reused.
+RUN_FILES = ("config.yaml", "command.txt", "meta.json", "tb", "progress.csv", "learning_curve.csv",
+             "learning_curve.png", "checkpoints", "best_model.zip", "best_vecnormalize.pkl",
+             "final_model.zip", "vecnormalize.pkl")
+
+
+def _check_new_run_dir(run_dir: Path) -> None:
+    """A new run may start in a missing or empty folder, or in a folder of a run that left no
+    checkpoint (it failed or was stopped before its first one)."""
+    if not run_dir.exists():
+        return
+    if not run_dir.is_dir():
+        raise ConfigError(f"run folder {str(run_dir)!r} is a file; choose another --run-dir")
+    if latest_checkpoint(run_dir) is not None:
+        raise ConfigError(
+            f"run folder {str(run_dir)!r} already holds a run with checkpoints; "
+            "pass --resume to continue it or choose another --run-dir"
+        )
+    other = sorted(p.name for p in run_dir.iterdir()
+                   if p.name not in RUN_FILES and not (p.name.startswith(("config.", "progress."))))
+    if other:
+        raise ConfigError(
+            f"run folder {str(run_dir)!r} is not empty and not a run folder (it holds {', '.join(other[:3])}"
+            f"{', ...' if len(other) > 3 else ''}); choose another --run-dir"
+        )
+
+
+def _clear_run_files(run_dir: Path) -> None:
+    """Remove what an earlier run without checkpoints left, so the logs do not mix runs."""
+    import shutil
+
+    if not run_dir.is_dir():
+        return
+    for p in run_dir.iterdir():
+        if p.name in RUN_FILES or p.name.startswith(("config.", "progress.")):
+            shutil.rmtree(p) if p.is_dir() else p.unlink()
 
 
 def _write_run_files(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> None:
@@ -516,12 +672,16 @@ def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress:
           command: list[str] | None = None) -> Path:
     """Train (or, with ``resume``, continue) a run in ``run_dir``; returns the final model path.
 
-    An interrupt (Ctrl-C) saves a checkpoint before returning; a killed run resumes from its
-    last periodic checkpoint.
+    Everything is checked (env keywords, hyperparameters, the baseline, the folder) before the
+    run folder is written. A new run may use a missing or empty folder, or one whose earlier
+    run left no checkpoint. Training stops at :func:`planned_steps` (the total rounded up to
+    whole rollouts). An interrupt (Ctrl-C, or SIGTERM from a scheduler or ``kill``) saves a
+    checkpoint before the exception propagates (:class:`Terminated` for SIGTERM); a killed
+    run resumes from its last periodic checkpoint.
 
     Raises:
-        ConfigError: an unknown env id, a resume folder without a checkpoint, a config that
-            SB3 rejects.
+        ConfigError: an unknown env id, a resume folder without a checkpoint, a folder that
+            holds another run, a config that SB3 or the env rejects.
     """
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
@@ -536,44 +696,46 @@ def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress:
         if found is None:
             raise ConfigError(
                 f"cannot resume {str(run_dir)!r}: it has no checkpoint (checkpoints/model_*_steps.zip); "
-                "start a new run without --resume"
+                "start a new run without --resume (the same --run-dir may be reused)"
             )
         model_path, stats_path = found
-        new_stage = _record_resume(cfg, run_dir, command)
-        env = make_train_env(cfg, seed=cfg.seed + 7919 * (1 + int(model_path.stem.split("_")[1])))
+        if cfg.normalize and stats_path is None:
+            raise ConfigError(f"checkpoint {model_path.name} has no VecNormalize statistics beside it")
+        steps = int(model_path.stem.split("_")[1])
+        started -= _checkpoint_walls(run_dir).get(str(steps), 0.0)  # the clock continues
+        env = make_train_env(cfg, seed=cfg.seed + 7919 * (1 + steps))
         if cfg.normalize:
-            if stats_path is None:
-                raise ConfigError(f"checkpoint {model_path.name} has no VecNormalize statistics beside it")
             env = VecNormalize.load(str(stats_path), env)
         model = algo.load(model_path, env=env, device="cpu")
-        remaining = cfg.n_timesteps - model.num_timesteps
-        stage_start = model.num_timesteps if new_stage else 0
     else:
-        stage_start = 0
-        if run_dir.exists() and any(run_dir.iterdir()):
-            raise ConfigError(
-                f"run folder {str(run_dir)!r} already exists and is not empty; "
-                "pass --resume to continue it or choose another --run-dir"
-            )
-        _write_run_files(cfg, run_dir, command)
+        _check_new_run_dir(run_dir)
         env = make_train_env(cfg, seed=cfg.seed)
         if cfg.normalize:
             env = VecNormalize(env, gamma=cfg.hyperparams.get("gamma", 0.99))
         try:
             model = algo(cfg.policy, env, policy_kwargs=_policy_kwargs(cfg), seed=cfg.seed, device="cpu",
                          verbose=0, **cfg.hyperparams)
-        except (TypeError, ValueError) as err:
+        except (TypeError, ValueError, AssertionError) as err:
+            env.close()
             raise ConfigError(f"{cfg.algo} rejected the configuration: {err}") from None
-        remaining = cfg.n_timesteps
-    model.set_logger(_make_logger(run_dir))
-    callbacks = _make_callbacks(cfg, run_dir, started, stage_start)
     try:
-        if remaining > 0:
-            model.learn(remaining, callback=callbacks, reset_num_timesteps=not resume,
-                        progress_bar=progress)
-    except KeyboardInterrupt:
-        save_checkpoint(model, run_dir)
-        raise
+        stage_start = model.num_timesteps if resume and _is_new_stage(cfg, run_dir) else 0
+        callbacks = _make_callbacks(cfg, run_dir, started, stage_start)  # checks the baseline
+        if resume:  # every check passed: now the folder is written
+            _record_resume(cfg, run_dir, command)
+        else:
+            _clear_run_files(run_dir)
+            _write_run_files(cfg, run_dir, command)
+        model.set_logger(_make_logger(run_dir))
+        steps = planned_steps(cfg, model.num_timesteps) - model.num_timesteps
+        with _sigterm_as_interrupt():
+            try:
+                if steps > 0:
+                    model.learn(steps, callback=callbacks, reset_num_timesteps=not resume,
+                                progress_bar=progress)
+            except KeyboardInterrupt:
+                save_checkpoint(model, run_dir, started)
+                raise
     finally:
         env.close()
     final = run_dir / "final_model.zip"
@@ -581,7 +743,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress:
     vn = model.get_vec_normalize_env()
     if vn is not None:
         vn.save(str(run_dir / "vecnormalize.pkl"))
-    save_checkpoint(model, run_dir)
+    save_checkpoint(model, run_dir, started)
     return final
 
 
@@ -597,7 +759,7 @@ def _parse_overrides(items: list[str] | None) -> dict[str, Any]:
         if not eq or not key.strip():
             raise CLIError(f"--hyperparams {item!r} is not key=value; write e.g. --hyperparams gamma=0.999")
         try:
-            value = yaml.safe_load(text)
+            value = yaml.load(text, Loader=_Loader)  # noqa: S506 - SafeLoader subclass; reads 1e-3
         except yaml.YAMLError:
             raise CLIError(f"--hyperparams {item!r}: {text!r} is not a YAML value") from None
         node = out
@@ -623,6 +785,22 @@ def _train_arguments(p) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
+def _step_plan(cfg: TrainConfig, start: int) -> str:
+    """``for 4,096 steps (3,000 rounded up to whole rollouts of 512 x 8 steps)``, and where the
+    checkpoints land when ``n_envs`` does not divide ``checkpoint_freq``."""
+    end = planned_steps(cfg, start)
+    chunk = steps_per_iteration(cfg)
+    what = "rollouts of n_steps x n_envs" if cfg.algo == "PPO" else "iterations of train_freq x n_envs"
+    text = f"from step {start:,} to {end:,}" if start else f"for {end:,} steps"
+    if end != max(cfg.n_timesteps, start):
+        text += f" ({cfg.n_timesteps:,} rounded up to whole {what} = {chunk:,} steps)"
+    freq = cfg.checkpoint_freq
+    if freq and freq % cfg.n_envs:
+        text += (f"; checkpoints at the first step at or past each multiple of {freq:,} (the {cfg.n_envs} "
+                 f"envs step together)")
+    return text
+
+
 def _train(args) -> int:
     from soft_snake_gym.cli import CLIError
 
@@ -644,15 +822,18 @@ def _train(args) -> int:
         _check_env_id(args.env_id)
         cfg = load_train_config(args.env_id, args.algo, args.config, overrides)
         run_dir = Path(args.run_dir or f"runs/{cfg.env_id}_{cfg.algo}_s{cfg.seed}")
-    print(f"training {cfg.algo} on {cfg.env_id} for {cfg.n_timesteps} steps with {cfg.n_envs} envs "
+    found = latest_checkpoint(run_dir) if args.resume and run_dir.is_dir() else None
+    start = int(found[0].stem.split("_")[1]) if found else 0
+    print(f"training {cfg.algo} on {cfg.env_id} {_step_plan(cfg, start)} with {cfg.n_envs} envs "
           f"-> {run_dir}" + (" (resumed)" if args.resume else ""))
     t0 = time.time()
     try:
         final = train(cfg, run_dir, resume=bool(args.resume), progress=not args.no_progress)
-    except KeyboardInterrupt:
-        print(f"interrupted; a checkpoint was saved. Continue with: soft-snake train --resume {run_dir}",
+    except KeyboardInterrupt as err:
+        how = "terminated (SIGTERM)" if isinstance(err, Terminated) else "interrupted"
+        print(f"{how}; a checkpoint was saved. Continue with: soft-snake train --resume {run_dir}",
               file=sys.stderr)
-        return 130
+        return 143 if isinstance(err, Terminated) else 130
     wall = time.time() - t0
     print(f"done in {wall:.0f} s; final model {final}")
     curve = run_dir / "learning_curve.csv"

@@ -160,9 +160,10 @@ def test_observation_blocks_hold_the_simulator_quantities():
 
 # --- determinism and pickling ------------------------------------------------------------------
 @pytest.mark.parametrize("env_id", IDS)
-@pytest.mark.parametrize("randomize", [None, {"E": [1.5e6, 2.5e6], "rho": [900.0, 1100.0], "mu_s": [0.9, 1.2]}])
+@pytest.mark.parametrize("randomize", [False, True])
 def test_exact_determinism_of_a_200_step_random_rollout(env_id, randomize):
-    kwargs = {} if randomize is None else {"randomize": randomize}
+    medium = {"rho": [900.0, 1100.0]} if env_id == "SoftEel-v0" else {"mu_s": [0.9, 1.2]}
+    kwargs = {"randomize": {"E": [1.5e6, 2.5e6], **medium}} if randomize else {}
     a = rollout(gym.make(env_id, **kwargs), seed=7, n=200)
     b = rollout(gym.make(env_id, **kwargs), seed=7, n=200)
     assert len(a) == len(b)
@@ -423,17 +424,16 @@ def test_seeded_noisy_starts_differ_but_stay_small():
 
 def test_randomization_draws_physics_per_episode_and_reports_it():
     ranges = {"E": [1.0e6, 3.0e6], "damping_bend": [0.0, 0.1], "damping_stretch": [0.0, 5.0], "rho": [900.0, 1100.0],
-              "C_D": [1.0, 2.0], "C_A": [1.0, 2.0], "C_f": [0.2, 0.4], "mu_s": [0.5, 0.6], "mu_d": [0.55, 0.9]}
+              "C_D": [1.0, 2.0], "C_A": [1.0, 2.0], "C_f": [0.2, 0.4]}
     env = gym.make("SoftEel-v0", randomize=ranges)
     _, info = env.reset(seed=0)
     drawn = info["randomized"]
     assert set(drawn) == set(ranges)
     for k, (lo, hi) in ranges.items():
         assert lo <= drawn[k] <= hi
-    assert drawn["mu_d"] <= drawn["mu_s"]
     cfg = env.unwrapped.sim.config
-    assert (cfg.rod.E, cfg.fluid.rho, cfg.fluid.C_D, cfg.ground.mu_s) == (
-        drawn["E"], drawn["rho"], drawn["C_D"], drawn["mu_s"])
+    assert (cfg.rod.E, cfg.fluid.rho, cfg.fluid.C_D, cfg.fluid.C_f) == (
+        drawn["E"], drawn["rho"], drawn["C_D"], drawn["C_f"])
     sim_before = env.unwrapped.sim
     _, info2 = env.reset()
     assert info2["randomized"] != drawn

@@ -156,3 +156,108 @@ def test_shipped_agents_beat_their_baselines(env_id, baseline):
     if env_id == "SoftEel-v0":
         assert agent["average_speed"][0] > base["average_speed"][0]
         assert agent["cost_of_transport"][0] <= base["cost_of_transport"][0]
+
+
+# --- issue 15: nothing written before every check passed, exact step counts, SIGTERM ------------
+@pytest.mark.parametrize(
+    "extra,message",
+    [
+        (["--hyperparams", "env_kwargs.foo=1"], "unknown key 'foo' in SoftEel-v0"),
+        (["--hyperparams", "gamma=1.5"], "hyperparameter gamma = 1.5 must be a number in [0.0, 1.0] (the discount factor)"),
+        (["--hyperparams", "n_steps=0"], "hyperparameter n_steps = 0 must be an integer in [1, inf)"),
+        (["--hyperparams", "learning_rate=-1e-3"], "learning_rate = -0.001 must be a number in (0.0, inf)"),
+        (["--hyperparams", "baseline=pdi"], "unknown policy 'pdi'; did you mean 'pid'?"),
+    ],
+)
+def test_a_failed_train_writes_nothing(extra, message, tmp_path, capsys):
+    run = tmp_path / "r5"
+    assert main(["train", "SoftEel-v0", "--run-dir", str(run), "--no-progress", *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1, err
+    assert not run.exists()
+
+
+def test_a_folder_without_checkpoint_is_reused_and_steps_are_exact(tmp_path, capsys):
+    run = tmp_path / "r5"
+    run.mkdir()
+    (run / "config.yaml").write_text("SoftEel-v0: {}\n")  # what a run that died early leaves
+    (run / "learning_curve.csv").write_text("timesteps,wall_s,return_mean\n999,1.0,5.0\n")
+    hyper = [h for h in TINY if not h.startswith(("eval_freq", "checkpoint_freq"))]
+    # n_envs 2 x n_steps 64: a rollout is 128 steps; 200 rounds up to 256
+    code = main(["train", "SoftEel-v0", "--run-dir", str(run), "--no-progress", "--n-timesteps", "200",
+                 "--hyperparams", *hyper, "checkpoint_freq=100", "eval_freq=100", "baseline=none"])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "for 256 steps (200 rounded up to whole rollouts of n_steps x n_envs = 128 steps)" in out
+    saved = sorted(int(p.stem.split("_")[1]) for p in (run / "checkpoints").glob("model_*_steps.zip"))
+    assert saved == [100, 200, 256]  # at the multiples of checkpoint_freq, then the final one
+    with open(run / "learning_curve.csv") as fh:
+        first = [(int(r["timesteps"]), float(r["wall_s"])) for r in csv.DictReader(fh)]
+    assert [s for s, _ in first] == [2, 100, 200, 256]  # the stale row of the dead run is gone
+    # resuming continues the step grid and the wall clock of the learning curve
+    assert main(["train", "--resume", str(run), "--n-timesteps", "300", "--no-progress"]) == 0
+    assert "from step 256 to 384" in capsys.readouterr().out
+    saved = sorted(int(p.stem.split("_")[1]) for p in (run / "checkpoints").glob("model_*_steps.zip"))
+    assert saved == [100, 200, 256, 300, 384]
+    with open(run / "learning_curve.csv") as fh:
+        rows = [(int(r["timesteps"]), float(r["wall_s"])) for r in csv.DictReader(fh)]
+    walls = [w for _, w in rows]
+    assert walls == sorted(walls) and walls[len(first)] >= first[-1][1]
+    # a folder holding a run with checkpoints is not reused
+    assert main(["train", "SoftEel-v0", "--run-dir", str(run), "--no-progress"]) == 2
+    assert "pass --resume" in capsys.readouterr().err
+
+
+def test_planned_steps_round_up_to_whole_rollouts():
+    from soft_snake_gym.training import planned_steps
+
+    cfg = load_train_config("SoftEel-v0", overrides={"n_timesteps": 3000, "n_envs": 8, "n_steps": 512})
+    assert planned_steps(cfg) == 4096
+    cfg = load_train_config("SoftEel-v0", overrides={"n_timesteps": 200_000})
+    assert planned_steps(cfg, 148_312) == 148_312 + 13 * 4096  # a Ctrl-C checkpoint mid-rollout
+    assert planned_steps(cfg, 204_800) == 204_800  # already past the total: nothing to do
+    sac = load_train_config("SoftEel-v0", "SAC", overrides={"n_timesteps": 1001, "n_envs": 2})
+    assert planned_steps(sac) == 1002
+
+
+def test_git_commit_says_when_there_is_no_checkout(tmp_path):
+    from soft_snake_gym.training import NO_CHECKOUT, _git_commit
+
+    installed = tmp_path / "site-packages" / "soft_snake_gym"
+    installed.mkdir(parents=True)
+    (installed / "__init__.py").write_text("")
+    assert _git_commit(installed) == NO_CHECKOUT
+    # a venv inside some other repository: the repository does not track the package
+    subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
+    assert _git_commit(installed) == NO_CHECKOUT
+    here = _git_commit()  # the tests run from a checkout
+    assert len(here) == 40 and int(here, 16) >= 0
+
+
+def test_sigterm_saves_a_checkpoint_and_prints_the_resume_command(tmp_path):
+    run = tmp_path / "terminated"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "soft_snake_gym.cli", "train", "SoftEel-v0", "--n-timesteps", "100000",
+         "--run-dir", str(run), "--no-progress", "--hyperparams", *TINY, "eval_freq=0",
+         "checkpoint_freq=100000"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        deadline = time.time() + 240  # training has started once progress.csv has a row
+        while time.time() < deadline and proc.poll() is None:
+            csv_path = run / "progress.csv"
+            if csv_path.is_file() and len(csv_path.read_text().splitlines()) >= 2:
+                break
+            time.sleep(0.5)
+        assert proc.poll() is None, proc.communicate()[1]
+        assert not list((run / "checkpoints").glob("model_*_steps.zip"))  # none periodic yet
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 143, err
+    assert f"Continue with: soft-snake train --resume {run}" in err and "Traceback" not in err
+    assert "SIGTERM" in err
+    assert list((run / "checkpoints").glob("model_*_steps.zip"))
+    assert list((run / "checkpoints").glob("vecnormalize_*_steps.pkl"))

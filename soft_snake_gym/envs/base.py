@@ -14,6 +14,7 @@ import dataclasses
 import math
 import os
 import sys
+import warnings
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,7 +26,7 @@ import numpy as np
 from soft_snake_gym.config import ConfigError, from_dict, load_yaml, with_preset
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.task import G
-from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig
+from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig, plain_number
 from soft_snake_gym.physics import Simulator, body_from_curvature
 from soft_snake_gym.physics import kernels as K
 
@@ -37,10 +38,16 @@ __all__ = [
     "resolve_settings",
 ]
 
+SLOW_SUBSTEPS = 1000
+"""Explicit sub-steps per integrator step above which an env warns that it will be slow."""
+
+
 # --- settings ---------------------------------------------------------------------------------
 def _check_number(cls: str, name: str, value: Any, lo: float | None = None, lo_open: bool = False) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ValueError(f"{cls}.{name} = {value!r} must be a finite number")
+    number = plain_number(value)
+    if number is None or not math.isfinite(number):
+        bound = "" if lo is None else f" {'>' if lo_open else '>='} {lo}"
+        raise ValueError(f"{cls}.{name} = {value!r} must be a finite number{bound}")
     if lo is not None and (value <= lo if lo_open else value < lo):
         raise ValueError(f"{cls}.{name} = {value!r} must be {'>' if lo_open else '>='} {lo}")
 
@@ -52,8 +59,10 @@ class Randomization:
 
     Fields map onto :class:`~soft_snake_gym.params.Rod` (``E``, ``E_bend``, ``damping_bend``, ``damping_stretch``),
     :class:`~soft_snake_gym.params.Fluid` (``rho``, ``C_f``, ``C_D``, ``C_A``) and
-    :class:`~soft_snake_gym.params.Ground` (``mu_s``, ``mu_d``; a drawn ``mu_d`` above the drawn
-    ``mu_s`` is lowered to it). The draws happen in field order from ``env.np_random``.
+    :class:`~soft_snake_gym.params.Ground` (``mu_s``, ``mu_d``). The draws happen in field order
+    from ``env.np_random``. The env rejects ranges whose draws could break a constraint of the
+    parameters (``mu_d <= mu_s``) and parameters its medium does not use (``mu_s`` in water,
+    ``C_D`` on the ground).
     """
 
     E: tuple[float, float] | None = None
@@ -78,12 +87,16 @@ class Randomization:
             rng = getattr(self, f.name)
             if rng is None:
                 continue
-            rng = tuple(rng)
+            try:
+                rng = tuple(plain_number(v) for v in rng)
+            except TypeError:
+                rng = (None,)
+            if len(rng) != 2 or not all(v is not None and math.isfinite(v) for v in rng):
+                raise ValueError(
+                    f"Randomization.{f.name} = {getattr(self, f.name)!r} must be a pair [low, high] "
+                    "of finite numbers"
+                )
             object.__setattr__(self, f.name, rng)
-            if len(rng) != 2 or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in rng
-            ):
-                raise ValueError(f"Randomization.{f.name} = {rng!r} must be a pair [low, high] of finite numbers")
             lo, hi = rng
             positive = f.name in ("E", "E_bend")
             if lo > hi or lo < 0 or (positive and lo <= 0):
@@ -106,17 +119,38 @@ class Randomization:
             value = float(rng.uniform(bounds[0], bounds[1]))
             drawn[f.name] = value
             sections[self._SECTIONS[f.name]][f.name] = value
-        gr = sections["ground"]
-        mu_s = gr.get("mu_s", base.ground.mu_s)
-        if gr.get("mu_d", base.ground.mu_d) > mu_s:  # kinetic friction may not exceed static
-            gr["mu_d"] = drawn["mu_d"] = mu_s
         config = dataclasses.replace(
             base,
             rod=dataclasses.replace(base.rod, **sections["rod"]),
             fluid=dataclasses.replace(base.fluid, **sections["fluid"]),
-            ground=dataclasses.replace(base.ground, **gr),
+            ground=dataclasses.replace(base.ground, **sections["ground"]),
         )
         return config, drawn
+
+    def check(self, medium: str, ground: Ground, where: str) -> None:
+        """Raise ``ConfigError`` if a randomized parameter has no effect in ``medium`` or if
+        a draw could give ``mu_d > mu_s`` (with ``ground`` the values not randomized)."""
+        unused = {"water": "ground", "ground": "fluid"}.get(medium)
+        useless = [f.name for f in dataclasses.fields(self)
+                   if getattr(self, f.name) is not None and self._SECTIONS[f.name] == unused]
+        if useless:
+            raise ConfigError(
+                f"{where}.randomize: {', '.join(useless)} {'has' if len(useless) == 1 else 'have'} no "
+                f"effect in the {medium} ({unused} parameters); remove "
+                f"{'it' if len(useless) == 1 else 'them'}"
+            )
+        if medium != "ground":
+            return
+        mu_s_low = ground.mu_s if self.mu_s is None else self.mu_s[0]
+        mu_d_high = ground.mu_d if self.mu_d is None else self.mu_d[1]
+        if mu_d_high > mu_s_low:
+            mu_s = f"randomize.mu_s low {mu_s_low!r}" if self.mu_s else f"ground.mu_s = {mu_s_low!r}"
+            mu_d = f"randomize.mu_d high {mu_d_high!r}" if self.mu_d else f"ground.mu_d = {mu_d_high!r}"
+            raise ConfigError(
+                f"{where}: {mu_d} exceeds {mu_s}, so some draws would have kinetic friction above "
+                "static friction; keep every mu_d draw at or below every mu_s draw "
+                "(randomize.mu_d high <= randomize.mu_s low)"
+            )
 
 
 @dataclass(frozen=True)
@@ -139,6 +173,10 @@ class BaseSettings:
 
     def __post_init__(self) -> None:
         cls = type(self).__name__
+        for f in dataclasses.fields(self):  # numpy scalars become Python numbers
+            number = plain_number(getattr(self, f.name))
+            if number is not None and type(number) is not type(getattr(self, f.name)):
+                object.__setattr__(self, f.name, number)
         if self.dt is not None:
             _check_number(cls, "dt", self.dt, 0.0, lo_open=True)
             ratio = self.dt / self.integrator.h
@@ -166,7 +204,7 @@ def resolve_settings(settings_cls: type, medium: str, config: str | Path | None,
     valid name.
     """
     data: dict[str, Any] = {}
-    where = f"the keywords of {label}" if label else settings_cls.__name__
+    where = label or settings_cls.__name__
     if config is not None:
         data = dict(load_yaml(config))
         where = Path(config).name
@@ -195,6 +233,21 @@ class SoftRobotEnv(gym.Env):
     Subclasses set ``medium``, ``settings_class``, ``env_id`` and implement the hooks
     ``_setup_task``, ``_build_spaces``, ``_action_params``, ``_initial_body``, ``_state_info``
     and ``_check_options``.
+
+    Attributes:
+        settings: the validated constructor keywords (``SwimSettings`` or ``InchSettings``).
+        sim: the :class:`~soft_snake_gym.physics.Simulator` (one robot), built once and
+            reused by every ``reset``; read its state (``sim.x`` (N, 2) [m], ``sim.kbar``,
+            ``sim.lbar``, energies) between steps, but step through the env.
+        base_config: the :class:`~soft_snake_gym.params.SimConfig` the env was built with
+            (``randomize`` draws around it at each reset).
+        N: number of nodes.
+        dt: control step [s]: ``n_substeps`` integrator steps of ``integrator.h``.
+        n_substeps: integrator steps per control step.
+        observation_structure: block name -> size of the observation, in order.
+        goal_direction: the episode's goal direction [rad from +x].
+        randomized: the physics values drawn at the last reset (empty without ``randomize``).
+        total_mass: mass of the body [kg].
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 100}
@@ -207,6 +260,15 @@ class SoftRobotEnv(gym.Env):
     def __init__(self, render_mode: str | None = None, config: str | Path | None = None, **kwargs: Any):
         settings = resolve_settings(self.settings_class, self.medium, config, kwargs, self.env_id)
         self._setup(settings, render_mode)
+        n = self.sim.substeps
+        if settings.integrator.method == "symplectic_euler" and n > SLOW_SUBSTEPS:
+            warnings.warn(
+                f"{self.env_id}: integrator.method = 'symplectic_euler' takes {n:,} sub-steps per "
+                f"h = {settings.integrator.h:g} s for this rod (its stiffest stretching mode), so every "
+                "step is slow; use 'backward_euler' (one implicit step per h) or a softer or "
+                "coarser rod",
+                stacklevel=2,
+            )
 
     @classmethod
     def _over_arrays(cls, settings: BaseSettings, sim: Simulator, task: dict[str, np.ndarray]):
@@ -218,6 +280,7 @@ class SoftRobotEnv(gym.Env):
 
     def _setup(self, settings: BaseSettings, render_mode: str | None, sim: Simulator | None = None,
                task: dict[str, np.ndarray] | None = None) -> None:
+        settings.randomize.check(self.medium, settings.ground, self.env_id or type(self).__name__)
         self.settings = s = settings
         self.base_config = SimConfig(
             rod=s.rod, medium=self.medium, fluid=s.fluid, ground=s.ground, integrator=s.integrator
@@ -278,6 +341,7 @@ class SoftRobotEnv(gym.Env):
         self._ledger = sim._out[K.O_LEDGER : K.O_LEDGER + K.N_LEDGER]  # a view: info["energy"]
         self._set_goal(s.goal_direction)
         self._failure: str | None = None
+        self._needs_reset = True
         self._trail_com: deque = deque(maxlen=self.trail_length)
         self._trail_head: deque = deque(maxlen=self.trail_length)
         self.randomized: dict[str, float] = {}
@@ -308,6 +372,20 @@ class SoftRobotEnv(gym.Env):
 
     # --- gymnasium API --------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Start an episode; returns ``(observation, info)``.
+
+        Args:
+            seed: seeds ``np_random`` (reset noise and ``randomize`` draws); None continues
+                the current generator.
+            options: ``goal_direction`` [rad] for this episode, and/or an exact initial body:
+                ``x`` (N, 2) [m], ``v`` (N, 2) [m/s], ``kbar`` (N-2,) [-], ``lbar`` (N-1,) [m]
+                (missing parts: at rest, straight rest shape, ``x`` built from ``kbar`` and
+                ``lbar``). Unknown options raise ``ValueError``.
+
+        Returns:
+            The first observation (see the class docstring's Observation Space) and ``info``
+            with the state entries, ``randomized`` (the drawn physics) and ``failure`` (None).
+        """
         super().reset(seed=seed)
         s = self.settings
         options = dict(options or {})
@@ -334,6 +412,7 @@ class SoftRobotEnv(gym.Env):
         self.sim.reset(**body)
 
         self._failure = None
+        self._needs_reset = False
         q, v, kbar, lbar, prm, _, _, ibuf, out = self._phys
         T.robot_reset(q, v, kbar, lbar, prm, ibuf, out, self._w, self._tp, self._obs_low,
                       self._obs_high, self._obs_raw, self._obs, self._rs)
@@ -349,6 +428,26 @@ class SoftRobotEnv(gym.Env):
         return self._obs.copy(), info
 
     def step(self, action):
+        """Hold ``action`` for one control step of ``dt`` seconds and advance the physics.
+
+        Args:
+            action: (n_inputs,) in [-1, 1] (clipped beyond); scaled to the input rates as the
+                class docstring's Action Space says. A wrong shape or a NaN raises ``ValueError``.
+
+        Returns:
+            ``(observation, reward, terminated, truncated, info)``: ``terminated`` is True on a
+            physics failure (``info["failure"]`` names it); ``truncated`` is always False here
+            (``TimeLimit`` from ``gym.make`` truncates); ``info`` holds every reward term, the
+            state and the running ``metrics``.
+
+        Raises:
+            gymnasium.error.ResetNeeded: ``step`` before the first ``reset``.
+            RuntimeError: ``step`` after a failure, before ``reset``.
+        """
+        if self._needs_reset:
+            raise gym.error.ResetNeeded(
+                f"{self.env_id}: call reset() before step() (the episode has not started)"
+            )
         if self._failure is not None:
             raise RuntimeError(
                 f"{self.env_id} episode terminated ({self._failure}); call reset() before stepping again"
@@ -387,6 +486,10 @@ class SoftRobotEnv(gym.Env):
         return self._obs.copy(), r[T.R_REWARD], not ok, False, info
 
     def render(self):
+        """The current frame: an (H, W, 3) uint8 RGB array with ``render_mode="rgb_array"``;
+        with ``"human"``, draws into a window and returns None. The picture shows the body
+        (head in red), the recent trails of the centre of mass and the head, the goal
+        direction, the time and, on the ground, the nodes stuck to the floor."""
         if self.render_mode is None:
             gym.logger.warn(
                 f"render() called without a render_mode; create the env with "

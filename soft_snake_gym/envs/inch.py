@@ -140,7 +140,18 @@ class InchEnv(SoftRobotEnv):
     | `reset_noise_scale`   | float             | `0.01`         | `s` of the Starting State                                                   |
     | `goal_direction`      | float             | `0.0`          | goal direction (rad from +x)                                                |
     | `max_observed_speed`  | float             | `2.0`          | bound of `com_velocity_body` (m/s)                                          |
-    | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping_bend, damping_stretch, rho, C_f, C_D, C_A, mu_s, mu_d |
+    | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping_bend, damping_stretch, mu_s, mu_d (every mu_d draw <= every mu_s draw; not the fluid's) |
+
+    ## Attributes
+    - ``sim``: the :class:`~soft_snake_gym.physics.Simulator` (one robot), built once and
+      reused by every reset; read its state between steps (``sim.x`` (N, 2) m, ``sim.kbar``,
+      ``sim.lbar``, ``sim.time`` s, energies), but step through the env.
+    - ``dt``: the control step [s], ``n_substeps`` integrator steps of ``integrator.h``.
+    - ``N``: number of nodes; ``total_mass`` [kg].
+    - ``observation_structure``: observation block name -> size, in order (the table above).
+    - ``settings``: the validated keywords; ``base_config``: the ``SimConfig`` built from them.
+    - ``goal_direction`` [rad]: the episode's goal; ``randomized``: the physics drawn at the
+      last reset.
 
     ## Version History
     * v0: initial version, on the PDER simulator of ``soft_snake_gym.physics``.

@@ -136,7 +136,7 @@ def make_policy(spec: str, env: Any, config: str | Path | None = None) -> Any:
 
             return load_trained(spec, env)
         close = difflib.get_close_matches(name, list(BASELINES), n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
+        hint = f"; did you mean {close[0]!r}?" if close else "."
         raise ConfigError(
             f"unknown policy {name!r}{hint} Choose one of {', '.join(BASELINES)}, "
             "or give the path to a saved SB3 model (.zip)"
