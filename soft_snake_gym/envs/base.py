@@ -37,6 +37,9 @@ __all__ = [
     "resolve_settings",
 ]
 
+_LEDGER = slice(K.O_LEDGER, K.O_LEDGER + K.N_LEDGER)  # info["energy"] in the diagnostics
+
+
 # --- settings ---------------------------------------------------------------------------------
 def _check_number(cls: str, name: str, value: Any, lo: float | None = None, lo_open: bool = False) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -271,7 +274,6 @@ class SoftRobotEnv(gym.Env):
         tp[T.T_MASS] = self.total_mass
         sim = self.sim
         self._phys = (sim._q, sim._v, sim._kbar, sim._lbar, sim._prm, sim._buf, sim._J, sim._ibuf, sim._out)
-        self._ledger = sim._out[K.O_LEDGER : K.O_LEDGER + K.N_LEDGER]  # a view: info["energy"]
         self._set_goal(s.goal_direction)
         self._failure: str | None = None
         self._trail_com: deque = deque(maxlen=self.trail_length)
@@ -375,7 +377,7 @@ class SoftRobotEnv(gym.Env):
         info.update(zip(T.TERM_KEYS, r[T.R_RF : T.R_RFAIL + 1], strict=True))
         info["failure"] = self._failure
         info["metrics"] = dict(zip(self._metric_keys, r[T.M_AVG :], strict=True))
-        info["energy"] = dict(zip(K.LEDGER_KEYS, self._ledger.tolist(), strict=True))
+        info["energy"] = dict(zip(K.LEDGER_KEYS, self._phys[8][_LEDGER].tolist(), strict=True))
         if self.render_mode is not None and ok:
             self._record_trail()
         if self.render_mode == "human":
