@@ -185,7 +185,10 @@ def from_dict(cls: type[T], data: Any, where: str | None = None) -> T:
         try:
             kwargs[key] = _coerce(value, hints[key], f"{where}.{key}")
         except ConfigError as err:
-            raise ConfigError(_with_range(cls, key, value, where) or str(err)) from None
+            # a wrong type at this key: the class's own message names the range; an error from
+            # inside a nested section already says what is wrong there
+            here = str(err).startswith(f"{where}.{key} = ")
+            raise ConfigError((here and _with_range(cls, key, value, where)) or str(err)) from None
     try:
         return cls(**kwargs)
     except ValueError as err:

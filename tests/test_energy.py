@@ -222,3 +222,18 @@ def test_env_info_reports_an_energy_ledger_that_closes_as_the_step_shrinks():
     assert 0.0 < coarse["error"] < 0.25 * coarse["actuator_work"]
     assert abs(fine["error"]) < coarse["error"] / 8
     assert abs(fine["error"]) < 0.03 * fine["actuator_work"]
+
+
+def test_set_state_starts_a_new_ledger():
+    sim = Simulator(SimConfig(rod=Rod(damping_bend=0.5)))
+    u = np.linspace(-1.0, 1.0, sim.N - 2)
+    for _ in range(30):
+        assert sim.step(u_k=u)
+    assert sim.energy_ledger()["actuator_work"] != 0.0
+    sim.set_state(v=np.zeros((sim.N, 2)))  # takes the body's kinetic energy away by hand
+    assert all(value == 0.0 for value in sim.energy_ledger().values())
+    for _ in range(30):
+        assert sim.step(u_k=u)
+    led = sim.energy_ledger()
+    assert led["actuator_work"] > 0.1 and led["damping_dissipation"] > 0.0
+    assert abs(led["error"]) < 0.1 * led["actuator_work"]

@@ -512,7 +512,7 @@ def test_preset_sets_the_physics_and_explicit_keywords_override_it(env_id, tmp_p
     env = gym.make(env_id, config=path, rod={"damping_stretch": 4.0, "damping_bend": 0.5}).unwrapped
     assert env.sim.config.rod.damping_stretch == 4.0 and env.sim.config.rod.damping_bend == 0.5
     assert env.sim.config.fluid.added_mass == "kelasidi"
-    with pytest.raises(ConfigError, match=f"keywords of {env_id}: preset = 'thesiss' is unknown.*available presets: .*thesis"):
+    with pytest.raises(ConfigError, match=f"{env_id}: preset = 'thesiss' is unknown.*available presets: .*thesis"):
         gym.make(env_id, preset="thesiss")
 
 

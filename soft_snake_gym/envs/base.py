@@ -41,6 +41,8 @@ __all__ = [
 SLOW_SUBSTEPS = 1000
 """Explicit sub-steps per integrator step above which an env warns that it will be slow."""
 
+_LEDGER = slice(K.O_LEDGER, K.O_LEDGER + K.N_LEDGER)  # info["energy"] in the diagnostics
+
 
 # --- settings ---------------------------------------------------------------------------------
 def _check_number(cls: str, name: str, value: Any, lo: float | None = None, lo_open: bool = False) -> None:
@@ -338,7 +340,6 @@ class SoftRobotEnv(gym.Env):
         tp[T.T_MASS] = self.total_mass
         sim = self.sim
         self._phys = (sim._q, sim._v, sim._kbar, sim._lbar, sim._prm, sim._buf, sim._J, sim._ibuf, sim._out)
-        self._ledger = sim._out[K.O_LEDGER : K.O_LEDGER + K.N_LEDGER]  # a view: info["energy"]
         self._set_goal(s.goal_direction)
         self._failure: str | None = None
         self._needs_reset = True
@@ -478,7 +479,7 @@ class SoftRobotEnv(gym.Env):
         info.update(zip(T.TERM_KEYS, r[T.R_RF : T.R_RFAIL + 1], strict=True))
         info["failure"] = self._failure
         info["metrics"] = dict(zip(self._metric_keys, r[T.M_AVG :], strict=True))
-        info["energy"] = dict(zip(K.LEDGER_KEYS, self._ledger.tolist(), strict=True))
+        info["energy"] = dict(zip(K.LEDGER_KEYS, self._phys[8][_LEDGER].tolist(), strict=True))
         if self.render_mode is not None and ok:
             self._record_trail()
         if self.render_mode == "human":
@@ -518,12 +519,7 @@ class SoftRobotEnv(gym.Env):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
-        del state["_ledger"]  # a view into the simulator's diagnostics: pickle would copy it
         return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__dict__.update(state)
-        self._ledger = self.sim._out[K.O_LEDGER : K.O_LEDGER + K.N_LEDGER]
 
     # --- helpers --------------------------------------------------------------------------
     def _check_action(self, action) -> np.ndarray:
