@@ -3,9 +3,8 @@ fixed seeded random-action sequence give the same episode metrics at the default
 step and with it divided by 4 and 16 (5 % in water, 10 % on the ground), and the
 ``soft-snake convergence`` command that prints the table.
 
-The cases in :data:`KNOWN_FAILING` do not converge on today's model (ground contact decided
-inside the step and material damping arrive with issue 9 items 2 and 4); they are strict
-``xfail``: the day one converges, the suite says so and its entry must be removed.
+The cases in :data:`KNOWN_FAILING` do not converge yet, each with the measured reason; they
+are strict ``xfail``: the day one converges, the suite says so and its entry must be removed.
 """
 
 from __future__ import annotations
@@ -50,15 +49,16 @@ CASES = [("SoftEel-v0", s) for s in EEL] + [("SoftWorm-v0", s) for s in WORM]
 #: (env, policy) -> what does not converge today (measured at factors 1, 4, 16, seed 0; the
 #: ratios are value / value at h/16, for h = 0.01 s, h/4, h/16).
 KNOWN_FAILING = {
-    ("SoftEel-v0", "open-loop"): "fluid power 0.950, 0.986 (5.02 % > 5 %)",
-    ("SoftEel-v0", "pid"): "backward Euler's numerical damping holds the closed loop: speed 1.39, 1.39; "
-    "actuator energy 0.23, 0.33; curvature error 0.029, 0.079",
-    ("SoftEel-v0", "pid:Kd=2,Ki=1"): "speed 2.90, 2.71; curvature error 0.029, 0.29",
-    ("SoftEel-v0", "decentralized"): "speed 0.127, -0.005, -0.0004 m/s; curvature error 0.035, 0.82",
-    ("SoftEel-v0", "decentralized:closure=pacemaker"): "speed 0.119, 0.030, -0.002 m/s; curv. error 0.83",
-    ("SoftEel-v0", "random"): "fluid power 0.47, 0.71; actuator energy 0.95, 0.93",
-    ("SoftWorm-v0", "zoo:ppo"): "distance 2.33, 0.38, 0.35 m; actuator energy 1.70, 1.19",
-    ("SoftWorm-v0", "random"): "distance 4.9, 0.1, -10.6 mm; friction energy 0.47, 0.70",
+    ("SoftEel-v0", "decentralized"): "curvature error 0.0369, 0.0287, 0.0421 (31.7 %): the phase "
+    "estimate from the measured curvature rate sees the vibrations a finer step resolves",
+    ("SoftEel-v0", "decentralized:closure=pacemaker"): "fluid power 4.00, 4.10, 4.38 W (8.8 %); "
+    "curvature error 0.0155, 0.0182, 0.0218",
+    ("SoftEel-v0", "random"): "fluid power 5.39, 6.02, 6.25 W (13.7 %; first order, 6.32 W at h/64): "
+    "rates that jump every step excite modes that backward Euler damps at h = 0.01 s",
+    ("SoftWorm-v0", "zoo:ppo"): "the shipped worm was trained on the old contact: distance 0.63, 0.39, "
+    "0.32 m",
+    ("SoftWorm-v0", "random"): "friction energy 72.9, 94.4, 135.3 J: stretching rings at 950 rad/s after "
+    "every jump of the rates, which h = 0.01 s cannot resolve",
 }
 
 
