@@ -1,6 +1,6 @@
 """Render the README's frame of SoftEel-v0: docs/img/softeel_frame.png.
 
-The eel starts on the serpenoid and swims 2 s under the open-loop gait (MODEL.md §7), then
+The eel starts on the serpenoid and swims 2 s under the open-loop gait (docs/model.md §7), then
 one ``rgb_array`` frame is saved. Run from the repository root: ``python docs/make_frame.py``.
 """
 

@@ -1,4 +1,4 @@
-"""Convergence in the time step (MODEL.md §5a, §10): is a result made by the model or by the
+"""Convergence in the time step (docs/model.md §5a, §10): is a result made by the model or by the
 integrator?
 
 :func:`convergence` runs ONE seeded episode of a policy at the env's integration step and with
@@ -69,7 +69,7 @@ METRICS: dict[str, tuple[str, ...]] = {
     "ground": ("distance", "energy_friction", "energy_actuator", "length_error"),
 }
 
-#: Relative tolerance per medium (MODEL.md §10).
+#: Relative tolerance per medium (docs/model.md §10).
 RELATIVE_TOLERANCE: dict[str, float] = {"water": 0.05, "ground": 0.10}
 
 #: Absolute tolerance per metric, for values near zero (justified in the module docstring).

@@ -1,5 +1,5 @@
 """The one metrics module: run episodes of any policy through SB3's ``evaluate_policy`` and
-collect per-episode metrics (MODEL.md §8).
+collect per-episode metrics (docs/model.md §8).
 
 Per episode:
 
@@ -7,7 +7,7 @@ Per episode:
 - ``average_speed`` [m/s]: centre-of-mass progress along the goal per time, over the window
   after ``transient`` seconds (the whole episode if it is shorter than twice that);
 - ``com_speed`` [m/s]: the centre of mass's displacement over the same window, whatever its
-  direction, divided by the window's duration (MODEL.md §8's average speed; equal to
+  direction, divided by the window's duration (docs/model.md §8's average speed; equal to
   ``average_speed`` for a robot that swims straight along the goal);
 - ``distance`` [m]: progress along the goal over the whole episode;
 - ``tracking_error``: mean over the same window and over nodes of ``|desired - measured|``,
@@ -16,7 +16,7 @@ Per episode:
 - ``mean_fluid_power`` [W] (over the whole episode) / ``energy_fluid`` [J] in water,
   ``window_fluid_power`` [W] (mean over the same window as the speed), ``energy_friction`` [J]
   on land;
-- ``energy_actuator`` [J] and ``cost_of_transport`` [-] (the env's, MODEL.md §8);
+- ``energy_actuator`` [J] and ``cost_of_transport`` [-] (the env's, docs/model.md §8);
 - ``failure``: the env's failure reason, or "";
 - ``window_start`` [s]: where the speed and error window began: ``transient``, or 0 for an
   episode shorter than twice that (a failure), whose whole length is used.

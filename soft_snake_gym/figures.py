@@ -205,7 +205,7 @@ def swim_snapshots(
 
 def rest_start_options(n_nodes: int = 10) -> dict[str, np.ndarray]:
     """Reset options: at rest, curvature (and rest curvature) equal to the thesis serpenoid at
-    t = 0 (MODEL.md §7, the decentralized start)."""
+    t = 0 (docs/model.md §7, the decentralized start)."""
     from soft_snake_gym.gaits import serpenoid, serpenoid_phase
     from soft_snake_gym.policies.open_loop import SerpenoidParams
 

@@ -1,4 +1,4 @@
-"""Traveling-wave gaits (MODEL.md §6): the serpenoid for swimming, the length waves (sinusoidal
+"""Traveling-wave gaits (docs/model.md §6): the serpenoid for swimming, the length waves (sinusoidal
 and peristaltic pulse) for inching.
 
 All functions are plain numpy on arrays, so policies and tests share them.
@@ -26,7 +26,7 @@ def serpenoid_on_nodes(
     ``alpha``, ``delta`` and ``gamma`` are given per node of the robot as designed,
     ``design_nodes`` nodes with edges of length ``l_d`` (``Rod.refined_from``; None:
     ``n_nodes``, no refinement), and ``delta = None`` is one wave along its interior,
-    ``2 pi / (design_nodes - 2)`` (MODEL.md §6). They describe a continuous body wave on arc
+    ``2 pi / (design_nodes - 2)`` (docs/model.md §6). They describe a continuous body wave on arc
     length ``s``: turning angle per unit length ``(alpha sin(omega t + 2 pi s / lambda +
     psi0) + gamma) / l_d`` with wavelength ``lambda = 2 pi l_d / delta``. On a rod of
     ``n_nodes`` nodes with the same length, edges of ``l = l_d (design_nodes - 1) / (n_nodes -
@@ -45,7 +45,7 @@ def serpenoid_on_nodes(
 
 def serpenoid(psi: np.ndarray, psi_dot: float | np.ndarray, alpha: float, gamma: float = 0.0
               ) -> tuple[np.ndarray, np.ndarray]:
-    """Desired curvature and its rate at phases ``psi`` (MODEL.md §6).
+    """Desired curvature and its rate at phases ``psi`` (docs/model.md §6).
 
     ``phi_des = alpha sin(psi) + gamma``, ``kappa_des = 2 tan(phi_des / 2)``,
     ``kappa_dot_des = alpha psi_dot cos(psi) sec^2(phi_des / 2)``.
@@ -60,7 +60,7 @@ def serpenoid(psi: np.ndarray, psi_dot: float | np.ndarray, alpha: float, gamma:
 
 def max_serpenoid_amplitude(n_nodes: int, delta: float, gamma: float = 0.0) -> float:
     """Largest ``alpha`` (bisection, 1e-4 rad) whose serpenoid body with equal edges does not
-    self-intersect at any phase (MODEL.md §6)."""
+    self-intersect at any phase (docs/model.md §6)."""
     from soft_snake_gym.physics.simulator import body_from_curvature
 
     lbar = np.ones(n_nodes - 1)
@@ -98,7 +98,7 @@ def _polyline_crosses(x: np.ndarray) -> bool:
 
 def length_wave(t: float, n_edges: int, l0: float, eps: float, omega: float, delta_l: float,
                 direction: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Compression wave of the rest lengths (MODEL.md §6).
+    """Compression wave of the rest lengths (docs/model.md §6).
 
     ``lbar_des,k = l0 (1 - eps (1 + sin(omega t - direction delta_l k)) / 2)``; with
     ``direction = +1`` the wave travels from tail to head, with -1 from head to tail.
@@ -114,7 +114,7 @@ def length_wave(t: float, n_edges: int, l0: float, eps: float, omega: float, del
 
 def pulse_wave(t: float, n_edges: int, l0: float, eps: float, omega: float, delta_l: float,
                duty: float, direction: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Peristaltic pulse of the rest lengths (MODEL.md §6): a raised-cosine compression pulse
+    """Peristaltic pulse of the rest lengths (docs/model.md §6): a raised-cosine compression pulse
     that occupies a fraction ``duty`` of each period, the rest of the time at ``l0``.
 
     With the phase ``theta_k = (omega t - direction delta_l k) mod 2 pi`` and

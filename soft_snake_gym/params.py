@@ -1,6 +1,6 @@
-"""Physical and numerical parameters, as frozen and validated dataclasses (MODEL.md §9).
+"""Physical and numerical parameters, as frozen and validated dataclasses (docs/model.md §9).
 
-Every field is in SI units and named as in MODEL.md. Impossible values raise ``ValueError``
+Every field is in SI units and named as in docs/model.md. Impossible values raise ``ValueError``
 naming the field, the value and the allowed range, so a typo in a YAML file or a sweep grid
 fails at construction time instead of as a NaN a thousand steps later.
 """
@@ -67,7 +67,7 @@ def _check_int(owner: object, name: str, lo: int, hi: int | None = None) -> None
 
 @dataclass(frozen=True)
 class Rod:
-    """The soft body: N nodes, N-1 edges of elliptic cross-section (MODEL.md §3, §9).
+    """The soft body: N nodes, N-1 edges of elliptic cross-section (docs/model.md §3, §9).
 
     ``N`` alone adds or removes edges of the same length and mass: ``Rod(N=300)`` is a 54 m
     eel. To model the *same* robot (length, mass, cross-section, material) with more nodes,
@@ -92,13 +92,13 @@ class Rod:
         E_stretch: stretching modulus [Pa] overriding ``E`` in ``EA`` (None: use ``E``).
         E_bend: bending modulus [Pa] overriding ``E`` in ``EI`` (None: use ``E``).
         damping_bend: Kelvin-Voigt damping of bending: a generalized force
-            ``-damping_bend * kappa_dot`` at each interior node [N m s] (MODEL.md §3). Default
+            ``-damping_bend * kappa_dot`` at each interior node [N m s] (docs/model.md §3). Default
             1.0: the smallest tried (0, 0.5, 0.75, 1) at which the PID's closed loop, the open
             loop and the shipped eel give the same metrics with the step divided by 4 and 16
             (at 0.5 the PID's fluid power still moved 5.7 %); a loss factor of about 1 % at the
             thesis gait, 0.8 of critical for the zig-zag mode. The sources use 0 (``preset="thesis"``).
         damping_stretch: Kelvin-Voigt damping of stretching: a force ``-damping_stretch`` times
-            the stretch rate along each edge [N s/m] (MODEL.md §3). Default 0: no baseline
+            the stretch rate along each edge [N s/m] (docs/model.md §3). Default 0: no baseline
             needs it to converge.
         refined_from: node count of the robot this rod refines (the robot as designed, whose
             per-node gait parameters apply); None: the rod is not a refinement.
@@ -161,7 +161,7 @@ class Rod:
             ):
                 object.__setattr__(self, name, value)
 
-    def refined(self, N: int) -> Rod:  # noqa: N803 - MODEL.md's name
+    def refined(self, N: int) -> Rod:  # noqa: N803 - docs/model.md's name
         """The same robot (length, mass, cross-section, material) with ``N`` nodes; see the
         class docstring. ``Rod().refined(10) == Rod()``."""
         return dataclasses.replace(self, refine=N)
@@ -188,12 +188,12 @@ class Rod:
         return math.pi * self.a * self.b**3 / 4.0
 
     @property
-    def EA(self) -> float:  # noqa: N802 - MODEL.md's name
+    def EA(self) -> float:  # noqa: N802 - docs/model.md's name
         """Stretching stiffness [N]."""
         return (self.E if self.E_stretch is None else self.E_stretch) * self.area
 
     @property
-    def EI(self) -> float:  # noqa: N802 - MODEL.md's name
+    def EI(self) -> float:  # noqa: N802 - docs/model.md's name
         """Bending stiffness [N m^2]."""
         return (self.E if self.E_bend is None else self.E_bend) * self.second_moment
 
@@ -210,7 +210,7 @@ class Rod:
 
 @dataclass(frozen=True)
 class Fluid:
-    """Water at rest, Morison-type drag and normal added mass (MODEL.md §4).
+    """Water at rest, Morison-type drag and normal added mass (docs/model.md §4).
 
     Attributes:
         rho: density of the water [kg/m^3].
@@ -243,7 +243,7 @@ class Fluid:
 
 @dataclass(frozen=True)
 class Ground:
-    """Stick-slip Coulomb friction on a flat floor, decided at the end of each step (MODEL.md §5).
+    """Stick-slip Coulomb friction on a flat floor, decided at the end of each step (docs/model.md §5).
 
     A node ends a step at rest where the force needed to hold it is within ``mu_s F_N``
     (``F_N = m_i g``) and otherwise slides with kinetic friction against its end velocity.
@@ -299,12 +299,12 @@ class Ground:
 
 @dataclass(frozen=True)
 class Integrator:
-    """Time integration (MODEL.md §5a).
+    """Time integration (docs/model.md §5a).
 
     Attributes:
         method: ``"backward_euler"`` (default; Newton on the banded analytic Jacobian) or
             ``"symplectic_euler"`` (explicit, sub-stepped; needs ``Rod.damping_bend > 0`` under
-            the curvature PID, see MODEL.md §5a).
+            the curvature PID, see docs/model.md §5a).
         h: step [s]; the inputs are held constant over it.
         substeps: internal steps per ``h``; ``None`` picks 1 for backward Euler and, for the
             explicit method, enough that each sub-step is at most 0.5 / omega_max, with

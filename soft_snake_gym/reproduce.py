@@ -467,7 +467,7 @@ alone, in about half a minute).
 - Swimming cells (`swim-gait`, `swim-stiffness`): `SoftEel-v0`, N = 10, start straight and at
   rest, no reset noise; `transient_cycles` = 1 gait period is discarded, speed, curvature error
   and fluid power are averaged over the next `cycles` = 2 periods. `swim-gait` uses
-  E_bend = 1.87e4 Pa (the sources' captions) and the PID gains (10, 2, 1) (MODEL.md §9: (10, 1, 5)
+  E_bend = 1.87e4 Pa (the sources' captions) and the PID gains (10, 2, 1) (docs/model.md §9: (10, 1, 5)
   can fold the body at that softness); `swim-stiffness` runs the open loop at several E_bend.
   The env's `max_curvature_rate` is raised per cell so that neither the open-loop rate nor the
   PID's saturation `1.5 alpha omega` is clipped.

@@ -1,10 +1,10 @@
-"""The thesis's parameter studies (MODEL.md §9) as resumable, parallel grids of episodes.
+"""The thesis's parameter studies (docs/model.md §9) as resumable, parallel grids of episodes.
 
 Studies:
 
 - ``swim-gait``: swimming, amplitude alpha x frequency omega, open loop and curvature PID,
   at the bending modulus E_bend = 1.87e4 Pa of the sources' captions (PID gains (10, 2, 1),
-  MODEL.md §9): average speed, curvature error, mean fluid power.
+  docs/model.md §9): average speed, curvature error, mean fluid power.
 - ``swim-stiffness``: swimming, open loop, alpha x omega for several bending moduli: average
   speed.
 - ``inch-friction``: inching, mu_s x mu_d (mu_d <= mu_s), open and closed loop: distance and
@@ -45,7 +45,7 @@ SOFT_E_BEND = 1.87e4
 """Bending modulus of the sources' amplitude-frequency studies [Pa]."""
 
 SOFT_GAINS = {"Kp": 10.0, "Kd": 2.0, "Ki": 1.0}
-"""PID gains the sources use at that softness (MODEL.md §9)."""
+"""PID gains the sources use at that softness (docs/model.md §9)."""
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Convergence in the time step (MODEL.md §5a, §10): every baseline, the shipped agents and a
+"""Convergence in the time step (docs/model.md §5a, §10): every baseline, the shipped agents and a
 fixed seeded random-action sequence give the same episode metrics at the default integration
 step and with it divided by 4 and 16 (5 % in water, 10 % on the ground), and the
 ``soft-snake convergence`` command that prints the table.

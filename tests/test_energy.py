@@ -1,4 +1,4 @@
-"""The energy checks of MODEL.md §4 and §10: the consistent added mass exchanges energy with the
+"""The energy checks of docs/model.md §4 and §10: the consistent added mass exchanges energy with the
 body without creating any, and the energy ledger closes to an error that shrinks with the step."""
 
 from __future__ import annotations

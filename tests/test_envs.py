@@ -124,7 +124,7 @@ def test_spaces_are_float32_boxes_with_named_finite_layout(env_id):
             ("stuck", N), ("com_velocity_body", 2),
         ]
         assert env.action_space.shape == (N - 1,)
-        # covers the inching wave of MODEL.md §6 at eps = 0.3, omega = 2 pi
+        # covers the inching wave of docs/model.md §6 at eps = 0.3, omega = 2 pi
         assert env.max_length_rate >= 0.5 * 0.18 * 0.3 * 2 * math.pi
 
 
@@ -236,7 +236,7 @@ def test_zero_action_leaves_a_straight_eel_still():
 
 
 def _serpenoid_rollout(env, alpha, omega, steps):
-    """Open-loop serpenoid through the env's normalized actions (MODEL.md §7)."""
+    """Open-loop serpenoid through the env's normalized actions (docs/model.md §7)."""
     u = env.unwrapped
     n = u.N - 2
     delta = 2 * math.pi / n

@@ -1,4 +1,4 @@
-"""The peristaltic pulse wave (MODEL.md §6) and its use in the inching baselines."""
+"""The peristaltic pulse wave (docs/model.md §6) and its use in the inching baselines."""
 
 from __future__ import annotations
 

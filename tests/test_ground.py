@@ -1,4 +1,4 @@
-"""Stick-slip friction on the ground (MODEL.md §5) and the inching length wave (§6)."""
+"""Stick-slip friction on the ground (docs/model.md §5) and the inching length wave (§6)."""
 
 from __future__ import annotations
 
@@ -75,7 +75,7 @@ def inch(direction: int, cycles: int = 4, eps: float = 0.2, omega: float = np.pi
 
 
 def test_peristaltic_pulse_moves_the_worm_with_the_wave_and_the_sine_wave_barely():
-    """MODEL.md §6: with isotropic friction a worm moves by anchoring. The pulse changes a
+    """docs/model.md §6: with isotropic friction a worm moves by anchoring. The pulse changes a
     few edges at a time and anchors the rest, so it carries the worm with the wave; the
     sinusoidal wave changes every edge at once and anchors little."""
     forward, sim = inch(+1, duty=0.5)
@@ -110,7 +110,7 @@ def test_friction_never_gives_more_than_static_friction_impulse():
 
 
 def test_friction_obeys_coulomb_at_the_end_of_every_step():
-    """MODEL.md §5 at the end of the step, node by node, under violent actuation: the friction
+    """docs/model.md §5 at the end of the step, node by node, under violent actuation: the friction
     force ``f = m (v - v0)/h - F(q1, v1)`` holds a node at rest within ``mu_s F_N`` and is
     ``mu_d F_N`` against the end velocity of a sliding node (to the smoothing far below V_tol)."""
     sim = Simulator(SimConfig(medium="ground"))

@@ -1,4 +1,4 @@
-"""The checks of MODEL.md §10, against analytic results."""
+"""The checks of docs/model.md §10, against analytic results."""
 
 from __future__ import annotations
 
@@ -108,7 +108,7 @@ def test_banded_added_mass_solve_matches_dense():
     F = rng.normal(size=2 * N)
     a = np.zeros(2 * N)
     K.solve_mass(sim._q, sim._prm, sim._buf[K.B_M], F, a, sim._J, sim._ibuf[K.I_PIV], True)
-    # dense M + M_A straight from MODEL.md §4
+    # dense M + M_A straight from docs/model.md §4
     Md = np.diag(np.repeat(sim.masses, 2))
     x = sim.x
     fl, rod = sim.config.fluid, sim.config.rod

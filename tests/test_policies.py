@@ -1,4 +1,4 @@
-"""The baseline controllers (MODEL.md §7) on the real envs, through SB3's evaluate_policy."""
+"""The baseline controllers (docs/model.md §7) on the real envs, through SB3's evaluate_policy."""
 
 from __future__ import annotations
 

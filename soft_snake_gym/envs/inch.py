@@ -47,7 +47,7 @@ class InchEnv(SoftRobotEnv):
     ## Description
     The same planar discrete elastic rod as ``SoftEel-v0`` (N = 10 nodes, 9 edges of 0.18 m,
     0.8 kg each) lying on a flat floor with Karnopp stick-slip friction (``mu_s = 1.15``,
-    ``mu_d = 0.8``; MODEL.md §5), its rest shape straight. The agent moves the rest lengths
+    ``mu_d = 0.8``; docs/model.md §5), its rest shape straight. The agent moves the rest lengths
     ``lbar`` of the 9 edges; a compression wave travelling from tail to head
     (``soft_snake_gym.gaits.length_wave``, eps = 0.3, omega = 2 pi rad/s, delta_l = pi/4) run
     open loop inches forward at about 8 mm/s. The task is to move along the goal direction (+x by default, the head ahead).
@@ -81,8 +81,8 @@ class InchEnv(SoftRobotEnv):
     - *reward_forward* = ``forward_reward_weight * forward_speed``: centre-of-mass
       displacement along the goal direction over the step, divided by ``dt`` (m/s).
     - *reward_energy* = ``-energy_cost_weight * P``: with ``energy_source="friction"`` (default)
-      ``P`` is the power lost to friction (the land energy metric of MODEL.md §5), with
-      ``"actuator"`` the absolute actuator power (MODEL.md §3), averaged over the step (W).
+      ``P`` is the power lost to friction (the land energy metric of docs/model.md §5), with
+      ``"actuator"`` the absolute actuator power (docs/model.md §3), averaged over the step (W).
     - *reward_ctrl* = ``-ctrl_cost_weight * ||action||^2`` (normalized action).
     - *reward_failure* = ``-failure_cost`` on the step that ends the episode by a failure.
 
@@ -124,8 +124,8 @@ class InchEnv(SoftRobotEnv):
     |-----------------------|-------------------|----------------|-----------------------------------------------------------------------------|
     | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: ground` key is accepted)        |
     | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
-    | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass), whose closed-loop results depend on the step (MODEL.md §5a) |
-    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9); `refine`: the same robot with that many nodes       |
+    | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass), whose closed-loop results depend on the step (docs/model.md §5a) |
+    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (docs/model.md §9); `refine`: the same robot with that many nodes       |
     | `fluid`               | dict or `Fluid`   | `Fluid()`      | unused on the ground                                                        |
     | `ground`              | dict or `Ground`  | `Ground()`     | friction: mu_s, mu_d, V_tol, g                                              |
     | `integrator`          | dict or `Integrator` | `Integrator()` | backward Euler at h = 0.01 s by default                                  |

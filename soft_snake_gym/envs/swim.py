@@ -70,7 +70,7 @@ class SwimEnv(SoftRobotEnv):
     ## Description
     The robot of Jaya Prakash's thesis (2020) and Scott, Jaya Prakash & Paley (2021): a planar
     discrete elastic rod of N = 10 nodes (9 edges of 0.18 m and 0.8 kg, 1.62 m and 7.2 kg in
-    all) in still water, with Morison-type drag and added mass (see ``MODEL.md``). The agent
+    all) in still water, with Morison-type drag and added mass (see ``docs/model.md``). The agent
     moves the rest curvature ``kbar`` of the 8 interior nodes; the body follows through its
     elasticity and the water pushes back. The task is to swim along a goal direction (+x by
     default; the body starts along +x with its head, node N-1, ahead). A serpenoid travelling
@@ -98,7 +98,7 @@ class SwimEnv(SoftRobotEnv):
     | Block               | Size | Bounds                        | Meaning (unit)                                          |
     |---------------------|------|-------------------------------|---------------------------------------------------------|
     | kappa               | N-2  | ±2 max_rest_curvature         | curvature ``2 tan(phi/2)`` of the interior nodes (-)    |
-    | kappa_dot           | N-2  | ±4 max_curvature_rate         | exact curvature rates, MODEL.md §2 (1/s)                |
+    | kappa_dot           | N-2  | ±4 max_curvature_rate         | exact curvature rates, docs/model.md §2 (1/s)                |
     | kbar                | N-2  | ±max_rest_curvature           | rest curvatures (-)                                     |
     | com_velocity_body   | 2    | ±max_observed_speed           | centre-of-mass velocity along the heading, lateral (m/s)|
     | goal_direction_body | 2    | ±1                            | cos, sin of (goal direction − heading)                  |
@@ -110,7 +110,7 @@ class SwimEnv(SoftRobotEnv):
 
     - *reward_forward* = ``forward_reward_weight * forward_speed``: the centre of mass's
       displacement along the goal direction over the step, divided by ``dt`` (m/s).
-    - *reward_energy* = ``-energy_cost_weight * |P_act|``: the actuator power (MODEL.md §3,
+    - *reward_energy* = ``-energy_cost_weight * |P_act|``: the actuator power (docs/model.md §3,
       W), averaged in absolute value over the integrator steps of the control step.
     - *reward_ctrl* = ``-ctrl_cost_weight * ||action||^2`` (normalized action).
     - *reward_failure* = ``-failure_cost`` on the step that ends the episode by a failure.
@@ -126,7 +126,7 @@ class SwimEnv(SoftRobotEnv):
     and ``serpenoid_delta`` are mapped onto arc length, ``gaits.serpenoid_on_nodes``). ``start_on_gait={"alpha": ..., "omega": ...,
     "delta": ..., "gamma": ..., "psi0": ...}`` (the fields of the baselines' serpenoid gait,
     :class:`~soft_snake_gym.policies.open_loop.SerpenoidParams`; missing ones take its defaults,
-    the thesis gait): at rest on that gait, the sources' start (MODEL.md §7): curvatures and
+    the thesis gait): at rest on that gait, the sources' start (docs/model.md §7): curvatures and
     rest curvatures equal to ``kappa_des`` at t = 0 (``psi_j = delta j + psi0``; ``omega`` does
     not change the shape at rest), chord along +x, centre of mass at the origin, with **no**
     noise (``reset_noise_scale`` is not used). ``reset(options={"x", "v", "kbar", "lbar"})`` sets
@@ -147,12 +147,12 @@ class SwimEnv(SoftRobotEnv):
     Every step: ``forward_speed`` (m/s), ``x_position``, ``y_position`` (centre of mass, m),
     ``heading`` (rad), ``time`` (s), ``fluid_power``, ``actuator_power`` (signed; both averaged
     over the step, W), ``kappa``, ``kbar``, ``newton_iterations``, every ``reward_<term>``,
-    ``failure`` (None or the reason) and ``metrics``, the running episode summary (MODEL.md §8):
+    ``failure`` (None or the reason) and ``metrics``, the running episode summary (docs/model.md §8):
     ``average_speed`` (distance / duration, m/s), ``distance`` (along the goal, m),
     ``displacement``, ``duration``, ``cost_of_transport`` (actuator energy / (total mass g
     distance); ``inf`` without forward progress), ``energy_fluid``, ``energy_actuator`` (sum of
     |work| per integrator step, J), ``actuator_work`` (signed, J); and ``energy``, the episode's
-    energy ledger (MODEL.md §4, J, see ``Simulator.energy_ledger``): ``actuator_work`` =
+    energy ledger (docs/model.md §4, J, see ``Simulator.energy_ledger``): ``actuator_work`` =
     ``fluid_dissipation`` + ``damping_dissipation`` + ``friction_dissipation`` +
     ``delta_kinetic`` + ``delta_elastic`` + ``delta_fluid_kinetic`` (the water's kinetic
     energy ``T_f``) + ``error`` (what the integrator made or lost; it shrinks with the step).
@@ -172,11 +172,11 @@ class SwimEnv(SoftRobotEnv):
     |-----------------------|-------------------|----------------|-----------------------------------------------------------------------------|
     | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: water` key is accepted)         |
     | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
-    | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass), whose closed-loop results depend on the step (MODEL.md §5a) |
-    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (MODEL.md §9): N, edge length and mass, a, b, E, damping_bend, damping_stretch; `refine`: the same robot with that many nodes (`Rod.refined`) |
+    | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass), whose closed-loop results depend on the step (docs/model.md §5a) |
+    | `rod`                 | dict or `Rod`     | `Rod()`        | the body (docs/model.md §9): N, edge length and mass, a, b, E, damping_bend, damping_stretch; `refine`: the same robot with that many nodes (`Rod.refined`) |
     | `fluid`               | dict or `Fluid`   | `Fluid()`      | water: rho, C_f, C_D, C_A                                                   |
     | `ground`              | dict or `Ground`  | `Ground()`     | unused in water; kept so one YAML file can describe both settings           |
-    | `integrator`          | dict or `Integrator` | `Integrator()` | backward Euler at h = 0.01 s by default (MODEL.md §5a)                   |
+    | `integrator`          | dict or `Integrator` | `Integrator()` | backward Euler at h = 0.01 s by default (docs/model.md §5a)                   |
     | `dt`                  | float or None     | `None`         | control step (s), a multiple of `integrator.h`; `None`: `integrator.h`      |
     | `max_curvature_rate`  | float             | `2 pi`         | curvature rate (1/s) of action 1.0 (per node of the robot as designed)      |
     | `max_rest_curvature`  | float             | `4.0`          | bound on `|kbar|` (turning angle 127°)                                      |

@@ -12,7 +12,7 @@ Per robot, besides the simulator's arrays (``q, v, kbar, lbar, prm, buf, J, ibuf
   bounds, control step, goal, reward weights, total mass);
 - ``rs`` (``N_RS``,) float64, the task's state and the last step's results at ``R_*``
   (status, centre of mass, heading, powers, forward speed, reward terms, reward) and the
-  running episode metrics at ``M_*`` (MODEL.md §8);
+  running episode metrics at ``M_*`` (docs/model.md §8);
 - ``act`` (n_act,) the action (clipped in place), ``uk`` (N-2,), ``ul`` (N-1,) the inputs,
   ``w`` (N,) the mass fractions, ``low``/``high`` the observation bounds, ``raw`` (float64,
   unclipped) and ``obs`` (float32) the observation.
@@ -38,7 +38,7 @@ drop_stale_cache(
 )
 
 G = 9.81
-"""Gravity used by the cost of transport (MODEL.md §8) [m/s^2]."""
+"""Gravity used by the cost of transport (docs/model.md §8) [m/s^2]."""
 
 # --- task constants tp ------------------------------------------------------------------------
 SWIM, INCH = 0, 1
@@ -103,7 +103,7 @@ def _com(q, w):
 
 @njit(cache=True, error_model="numpy")
 def _metrics(out, prm, tp, rs):
-    """Episode averages of MODEL.md §8 from the accumulated energies and the centre of mass."""
+    """Episode averages of docs/model.md §8 from the accumulated energies and the centre of mass."""
     dx = rs[R_COMX] - rs[R_COM0X]
     dy = rs[R_COMY] - rs[R_COM0Y]
     distance = dx * tp[T_GCOS] + dy * tp[T_GSIN]

@@ -1,4 +1,4 @@
-"""Numba kernels of the planar discrete elastic rod (MODEL.md §2-§5a).
+"""Numba kernels of the planar discrete elastic rod (docs/model.md §2-§5a).
 
 Conventions: positions ``q`` and velocities ``v`` are flat, interleaved arrays of length 2N
 (``q[2i], q[2i+1]`` are x, y of node i) so that they index the banded Jacobian directly; the
@@ -53,7 +53,7 @@ MAX_SWITCHES = 2  # contact changes per node and step: bounds the active-set pas
 # --- diagnostics -----------------------------------------------------------------------------
 (O_STATUS, O_NITER, O_RESIDUAL, O_P_FLUID, O_P_FRICTION, O_P_ACT, O_E_FLUID, O_E_FRICTION,
  O_E_ACT, O_W_ACT, O_NSTEPS) = range(11)
-# energy ledger (MODEL.md §4): damping power of the last step and its accumulated energy, and
+# energy ledger (docs/model.md §4): damping power of the last step and its accumulated energy, and
 # the body's kinetic and elastic energy and the water's kinetic energy T_f after the last step
 O_P_DAMP, O_E_DAMP, O_E_KIN, O_E_ELASTIC, O_T_FLUID = range(11, 16)
 # where the ledger starts (written at reset/set_state): those energies and the accumulated work
@@ -99,7 +99,7 @@ def _add_edge_pattern(J, k, s00, s01, s11):
 
 @njit(cache=True, error_model="numpy")
 def turning(q, j):
-    """Turning quantities at interior node j (MODEL.md §2).
+    """Turning quantities at interior node j (docs/model.md §2).
 
     Returns:
         (kappa, g0x, g0y, g1x, g1y, g2x, g2y, ta, tb, la, lb) packed as: kappa, the gradient
@@ -158,7 +158,7 @@ def edge_length_rates(q, v, out):
 
 @njit(cache=True, error_model="numpy")
 def elastic_energy(q, kbar, lbar, prm):
-    """Stretching plus bending energy ``E_s + E_b`` (MODEL.md §3) [J]."""
+    """Stretching plus bending energy ``E_s + E_b`` (docs/model.md §3) [J]."""
     N = q.size // 2
     EA, EI = prm[P_EA], prm[P_EI]
     e = 0.0
@@ -182,7 +182,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
     """
     N = q.size // 2
     EA, EI, d, db = prm[P_EA], prm[P_EI], prm[P_DSTRETCH], prm[P_DBEND]
-    # stretching (MODEL.md §3): force on x[k+1] is -EA (|e|/lbar - 1) t
+    # stretching (docs/model.md §3): force on x[k+1] is -EA (|e|/lbar - 1) t
     for k in range(N - 1):
         ex = q[2 * k + 2] - q[2 * k]
         ey = q[2 * k + 3] - q[2 * k + 1]
@@ -216,7 +216,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
                 _add_block(J, k, k + 1, t00, t01, t10, t11)
                 _add_block(J, k + 1, k, t00, t01, t10, t11)
                 _add_block(J, k + 1, k + 1, -t00, -t01, -t10, -t11)
-    # bending (MODEL.md §3): F = -(EI/lvor)(kappa - kbar)(1 + kappa^2/4) d phi/d x
+    # bending (docs/model.md §3): F = -(EI/lvor)(kappa - kbar)(1 + kappa^2/4) d phi/d x
     for j in range(1, N - 1):
         kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = turning(q, j)
         kb = EI / (0.5 * (lbar[j - 1] + lbar[j]))
@@ -280,7 +280,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
                        alpha * g2y * g2x + beta * hb01, alpha * g2y * g2y + beta * hb11)
     if not water:
         return 0.0
-    # drag (MODEL.md §4): F = -c_t l (v_t + v_t|v_t|) t - c_n l (v_n + v_n|v_n|) n, half per node
+    # drag (docs/model.md §4): F = -c_t l (v_t + v_t|v_t|) t - c_n l (v_n + v_n|v_n|) n, half per node
     ct = 0.25 * prm[P_RHO] * math.pi * prm[P_CF] * (prm[P_A] + prm[P_B])
     cn = prm[P_RHO] * prm[P_CD] * prm[P_A]
     power = 0.0
@@ -330,7 +330,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
 
 @njit(cache=True, error_model="numpy")
 def added_mass(q, prm, dv, out, J, coef, apply, jac):
-    """Added mass of MODEL.md §4: ``M_A`` puts ``mu_n/4 n n^T`` on the four blocks of each
+    """Added mass of docs/model.md §4: ``M_A`` puts ``mu_n/4 n n^T`` on the four blocks of each
     edge, ``mu_n = rho pi C_A a^2 l``. If ``apply``, add ``M_A dv`` to ``out``; if ``jac``,
     add ``coef M_A`` to the band ``J``."""
     N = q.size // 2
@@ -374,7 +374,7 @@ def solve_mass(q, prm, m, F, a, J, piv, water):
 
 @njit(cache=True, error_model="numpy")
 def fluid_momentum(q, v, prm, R, sp, sg, J, dt, jac):
-    """The water's kinetic energy ``T_f = sum_i 1/2 mu_n (v^i . n^i)^2`` (MODEL.md §4) and its
+    """The water's kinetic energy ``T_f = sum_i 1/2 mu_n (v^i . n^i)^2`` (docs/model.md §4) and its
     derivatives: adds ``sp P_f + sg G`` to R (2N,), with the water's momentum
     ``P_f = dT_f/dv`` (half of each edge's ``mu_n v_n n`` to each node) [N s] and
     ``G = dT_f/dx`` [N]. If ``jac``, adds the Jacobian of ``P_f - dt G`` with respect to the
@@ -436,7 +436,7 @@ def fluid_momentum(q, v, prm, R, sp, sg, J, dt, jac):
 def munk_force(q, v, prm, F):
     """Adds the velocity part of the consistent added-mass force, ``dT_f/dx - (dP_f/dx) v``
     (the turning normal's terms, the Munk moment), to F (2N,) [N]. With it,
-    ``(M + M_A) a = F_other + munk`` is the Lagrangian equation of ``T_f`` (MODEL.md §4)."""
+    ``(M + M_A) a = F_other + munk`` is the Lagrangian equation of ``T_f`` (docs/model.md §4)."""
     N = q.size // 2
     cm = prm[P_RHO] * math.pi * prm[P_CA] * prm[P_A] * prm[P_A]
     for i in range(N - 1):
@@ -466,7 +466,7 @@ def munk_force(q, v, prm, F):
 
 @njit(cache=True, error_model="numpy")
 def fluid_kinetic_energy(q, v, prm):
-    """``T_f = sum_i 1/2 mu_n (v^i . n^i)^2``, the water's kinetic energy (MODEL.md §4) [J]."""
+    """``T_f = sum_i 1/2 mu_n (v^i . n^i)^2``, the water's kinetic energy (docs/model.md §4) [J]."""
     N = q.size // 2
     cm = prm[P_RHO] * math.pi * prm[P_CA] * prm[P_A] * prm[P_A]
     tf = 0.0
@@ -483,7 +483,7 @@ def fluid_kinetic_energy(q, v, prm):
 @njit(cache=True, error_model="numpy")
 def damping_power(q, v, prm):
     """Power lost to material damping, ``damping_bend sum kappa_dot^2 + damping_stretch sum
-    ldot^2`` (MODEL.md §3) [W]."""
+    ldot^2`` (docs/model.md §3) [W]."""
     N = q.size // 2
     db, ds = prm[P_DBEND], prm[P_DSTRETCH]
     p = 0.0
@@ -506,7 +506,7 @@ def damping_power(q, v, prm):
 
 @njit(cache=True, error_model="numpy")
 def actuator_power(q, kbar, lbar, u_k, u_l, prm):
-    """Power the inputs put into the body, ``dE/dkbar . u_k + dE/dlbar . u_l`` (MODEL.md §3) [W]."""
+    """Power the inputs put into the body, ``dE/dkbar . u_k + dE/dlbar . u_l`` (docs/model.md §3) [W]."""
     N = q.size // 2
     EA, EI = prm[P_EA], prm[P_EI]
     p = 0.0
@@ -594,7 +594,7 @@ def node_tangent(q, i):
 
 @njit(cache=True, error_model="numpy")
 def kinetic_friction(q, v, i, fn, eps2, prm):
-    """Kinetic friction on sliding node i with normal load ``fn`` [N] (MODEL.md §5) and its
+    """Kinetic friction on sliding node i with normal load ``fn`` [N] (docs/model.md §5) and its
     derivative by the node's velocity (the tangent's dependence on q is left out).
 
     Isotropic: ``-mu_d fn v / s``, ``s = sqrt(|v|^2 + eps2)`` (a smoothing far below the
@@ -631,7 +631,7 @@ def kinetic_friction(q, v, i, fn, eps2, prm):
 @njit(cache=True, error_model="numpy")
 def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
     """Residual of backward Euler at the trial velocity ``v`` (also writes ``q = q0 + dt v``),
-    and if ``jac`` its Jacobian into J. In water with the consistent added mass (MODEL.md §4)
+    and if ``jac`` its Jacobian into J. In water with the consistent added mass (docs/model.md §4)
     in momentum form, ``R = M (v - v0) + P_f(q, v) - P_f(q0, v0) - dt (F(q, v) + dT_f/dx(q, v))``
     (``P_f(q0, v0)`` in ``buf[B_P0]``); with ``added_mass = "kelasidi"``,
     ``R = (M + M_A(q)) (v - v0) - dt F(q, v)``. Returns
@@ -692,7 +692,7 @@ def _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, jac):
 
 @njit(cache=True, error_model="numpy")
 def _update_contacts(v, buf, ibuf, prm, dt, n):
-    """Make stick-slip consistent with the end of a converged step (MODEL.md §5); True if a
+    """Make stick-slip consistent with the end of a converged step (docs/model.md §5); True if a
     node changed and the step must be solved again.
 
     Sliding nodes that end slower than ``V_tol`` stick. Otherwise every stuck node whose
@@ -735,7 +735,7 @@ def _update_contacts(v, buf, ibuf, prm, dt, n):
 
 @njit(cache=True, error_model="numpy")
 def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
-    """One backward-Euler step by damped Newton on the banded analytic Jacobian (MODEL.md §5a).
+    """One backward-Euler step by damped Newton on the banded analytic Jacobian (docs/model.md §5a).
     Returns (status, iterations, residual, fluid power, friction power)."""
     n = q.size
     q0, v0, vacc, dv = buf[B_Q0], buf[B_V0], buf[B_VACC], buf[B_DV]
@@ -775,7 +775,7 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     pass_it = 0
     while True:
         if rmax <= tol:
-            # stick-slip decided by the end of the step (MODEL.md §5): if a contact changes,
+            # stick-slip decided by the end of the step (docs/model.md §5): if a contact changes,
             # the step is solved again from the current iterate
             if medium != MEDIUM_GROUND or not _update_contacts(v, buf, ibuf, prm, dt, n):
                 break
@@ -812,7 +812,7 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
 def _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
     """One explicit semi-implicit (symplectic) Euler step: kick with F(q, v), then drift.
     In water ``(M + M_A(q)) a = F``, plus with the consistent added mass the velocity terms of
-    :func:`munk_force`. On the ground, friction is decided by the end of the kick (MODEL.md
+    :func:`munk_force`. On the ground, friction is decided by the end of the kick (docs/model.md
     §5): a node whose frictionless end velocity ``w`` could be stopped within ``mu_s F_N``
     sticks, any other slides with ``mu_d F_N`` against ``w`` (the lumped mass matrix is
     diagonal on the ground, so each node is decided on its own).

@@ -29,7 +29,7 @@ class SimulationError(RuntimeError):
 
 
 def node_masses(config: SimConfig) -> np.ndarray:
-    """Lumped node masses ``m_0 = m/2, m_k = m, m_(N-1) = m/2`` (MODEL.md §3), (N,) [kg]."""
+    """Lumped node masses ``m_0 = m/2, m_k = m, m_(N-1) = m/2`` (docs/model.md §3), (N,) [kg]."""
     m = np.full(config.rod.N, config.rod.edge_mass)
     m[0] = m[-1] = 0.5 * config.rod.edge_mass
     return m
@@ -145,7 +145,7 @@ def _as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
 
 
 class Simulator:
-    """A planar discrete elastic rod in water, on the ground, or in vacuum (MODEL.md).
+    """A planar discrete elastic rod in water, on the ground, or in vacuum (docs/model.md).
 
     The simulator allocates its arrays once; :meth:`reset` and :meth:`set_state` write into
     them, :meth:`set_config` changes physical parameters in place (for per-episode
@@ -336,7 +336,7 @@ class Simulator:
 
     @property
     def kappa_dot(self) -> np.ndarray:
-        """Exact curvature rates (MODEL.md §2), (N-2,) [1/s]."""
+        """Exact curvature rates (docs/model.md §2), (N-2,) [1/s]."""
         out = np.empty(self.N - 2)
         K.curvature_rates(self._q, self._v, out)
         return out
@@ -393,13 +393,13 @@ class Simulator:
 
     def fluid_kinetic_energy(self) -> float:
         """Kinetic energy of the water moved with the body, ``T_f = sum_i 1/2 mu_n (v^i . n^i)^2``
-        (MODEL.md §4; 0 out of water) [J]."""
+        (docs/model.md §4; 0 out of water) [J]."""
         if self.config.medium != "water":
             return 0.0
         return float(K.fluid_kinetic_energy(self._q, self._v, self._prm))
 
     def energy_ledger(self) -> dict[str, float]:
-        """The energy balance since the last :meth:`reset` or :meth:`set_state` (MODEL.md §4):
+        """The energy balance since the last :meth:`reset` or :meth:`set_state` (docs/model.md §4):
         ``actuator_work = fluid_dissipation + damping_dissipation + friction_dissipation +
         delta_kinetic + delta_elastic + delta_fluid_kinetic + error``, all in J.
 

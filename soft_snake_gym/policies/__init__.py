@@ -1,4 +1,4 @@
-"""Baseline controllers of the thesis (MODEL.md §7), as SB3-compatible policies.
+"""Baseline controllers of the thesis (docs/model.md §7), as SB3-compatible policies.
 
 ``make_policy("pid:alpha=0.5,omega=2.1", env)`` builds one from a short spec; a spec that is a
 path to a saved Stable-Baselines3 model loads that model instead.

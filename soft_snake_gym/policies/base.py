@@ -1,6 +1,6 @@
 """What every baseline controller shares: reading the env, batched SB3 ``predict``, state.
 
-A baseline is a controller of MODEL.md §7 wrapped in Stable-Baselines3's ``PolicyPredictor``
+A baseline is a controller of docs/model.md §7 wrapped in Stable-Baselines3's ``PolicyPredictor``
 protocol: ``predict(observation, state, episode_start, deterministic) -> (action, state)`` on
 batched observations. Its memory (clock, PID integral) lives in ``state``, an array
 (n_envs, state_size) that is zeroed on ``episode_start``, so the same object runs through

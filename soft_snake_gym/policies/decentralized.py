@@ -1,4 +1,4 @@
-"""Decentralized phase PID (MODEL.md §7): no shared clock, each node sees its head-ward
+"""Decentralized phase PID (docs/model.md §7): no shared clock, each node sees its head-ward
 neighbour.
 
 Node j estimates its own phase from its turning angle and rate,
@@ -43,14 +43,14 @@ class DecentralizedParams(PIDParams):
 
 
 def estimate_phase(kappa: np.ndarray, kappa_dot: np.ndarray, omega: float) -> np.ndarray:
-    """``psihat = atan2(phi, phi_dot / omega)`` with ``phi = 2 atan(kappa / 2)`` (MODEL.md §7)."""
+    """``psihat = atan2(phi, phi_dot / omega)`` with ``phi = 2 atan(kappa / 2)`` (docs/model.md §7)."""
     phi = 2.0 * np.arctan(0.5 * kappa)
     phi_dot = 4.0 * kappa_dot / (kappa * kappa + 4.0)
     return np.arctan2(phi, phi_dot / omega)
 
 
 class DecentralizedPhasePID(_SerpenoidPolicy):
-    """PID on each node's phase taken from its head-ward neighbour (MODEL.md §7).
+    """PID on each node's phase taken from its head-ward neighbour (docs/model.md §7).
 
     State per env: ``[t, integral_1 .. integral_(N-2)]`` (t only drives the pacemaker).
 

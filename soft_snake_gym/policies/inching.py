@@ -1,4 +1,4 @@
-"""Inching on land (MODEL.md §6-§7): a compression wave of the rest lengths.
+"""Inching on land (docs/model.md §6-§7): a compression wave of the rest lengths.
 
 ``wave="pulse"`` (default): the peristaltic pulse of :func:`soft_snake_gym.gaits.pulse_wave`,
 a raised-cosine compression of depth ``eps`` over a fraction ``duty`` of the edges, the others
@@ -110,7 +110,7 @@ class InchingPIDParams(InchingParams):
 
 
 class InchingWave(BaselinePolicy):
-    """Open loop ``u_l = lbar_dot_des + rest_gain (lbar_des - lbar)`` (MODEL.md §7; the bare
+    """Open loop ``u_l = lbar_dot_des + rest_gain (lbar_des - lbar)`` (docs/model.md §7; the bare
     ``u_l = lbar_dot_des`` once the rest lengths are on the wave). State per env: ``[t]``.
 
     Args:
@@ -165,7 +165,7 @@ class InchingWave(BaselinePolicy):
 
 class InchingPID(InchingWave):
     """Closed loop on the measured edge length,
-    ``u_l,k = lbar_dot_des,k + Kp (lbar_des,k - |e^k|)`` (MODEL.md §7).
+    ``u_l,k = lbar_dot_des,k + Kp (lbar_des,k - |e^k|)`` (docs/model.md §7).
 
     Args:
         env: SoftWorm env (or a DummyVecEnv of them).

@@ -1,4 +1,4 @@
-"""Open-loop serpenoid (MODEL.md §7): the rest curvature follows the traveling wave."""
+"""Open-loop serpenoid (docs/model.md §7): the rest curvature follows the traveling wave."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ __all__ = ["OpenLoopParams", "OpenLoopSerpenoid", "SerpenoidParams"]
 
 @dataclass(frozen=True)
 class SerpenoidParams:
-    """Serpenoid gait (MODEL.md §6), thesis defaults.
+    """Serpenoid gait (docs/model.md §6), thesis defaults.
 
     Attributes:
         alpha: amplitude of the turning angle [rad] (pi/6).
@@ -97,7 +97,7 @@ class OpenLoopParams(SerpenoidParams):
 
 
 class OpenLoopSerpenoid(_SerpenoidPolicy):
-    """The rest curvature follows the serpenoid (MODEL.md §7):
+    """The rest curvature follows the serpenoid (docs/model.md §7):
     ``u = kappa_dot_des + rest_gain (kappa_des - kbar)``.
 
     ``kbar`` is the controller's own command (the integral of its rates, what a motor's

@@ -1,4 +1,4 @@
-"""Actual-curvature PID on a centralized clock (MODEL.md §7)."""
+"""Actual-curvature PID on a centralized clock (docs/model.md §7)."""
 
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ def pid_law(
     kappa_dot_des: np.ndarray,
     integral: np.ndarray,
 ) -> np.ndarray:
-    """``u = kappa_dot_des + Kp e + Kd e_dot + Ki int e``, saturated (MODEL.md §7).
+    """``u = kappa_dot_des + Kp e + Kd e_dot + Ki int e``, saturated (docs/model.md §7).
 
     Updates ``integral`` in place (rectangle rule, before use); all arrays (n_envs, N-2).
     """
@@ -56,7 +56,7 @@ def pid_law(
 
 
 class CurvaturePID(_SerpenoidPolicy):
-    """PID on the measured curvature, reference from a centralized clock (MODEL.md §7).
+    """PID on the measured curvature, reference from a centralized clock (docs/model.md §7).
 
     State per env: ``[t, integral_1 .. integral_(N-2)]``.
 
