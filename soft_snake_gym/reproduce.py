@@ -446,19 +446,19 @@ alone, in about half a minute).
   gait, and the integral term then adds phase lag. Feedback still buys speed in most cells
   at a higher energy cost. At the default stiffness (1.875e6 Pa) the PID does cut the error,
   from 0.0196 (open loop) to 0.0070 (`soft-snake evaluate SoftEel-v0 --policy open-loop` / `pid`).
-- **Friction on land.** With the default wave (omega = 2 pi rad/s) the nodes slide most of the
-  time: a node is stuck (|v| < V_tol = 1 mm/s and the other forces within mu_s m g) in only about
-  2 % of the steps, so the friction energy is `mu_d m g x (path length)` and does not depend on
-  mu_s ({land["energy_low"]}). Static friction matters only where kinetic friction is low: at
-  mu_d = {land["mu_d_low"]:.2f} the open-loop distance goes {land["row_low"]} m for mu_s = {land["mu_s_list"]};
-  at higher mu_d it hardly changes with mu_s. Kinetic friction, against the thesis, helps: at
-  mu_s = {land["mu_s_high"]:.2f} the open loop goes {land["col_high"]} m for mu_d = {land["mu_d_list"]}. In this
-  model the sliding nodes push off the ground through kinetic friction, so more of it gives
-  more thrust (and proportionally more friction energy). A slower wave does not turn this
-  round: at omega = pi/2 rad/s the open loop barely moves (0.006, -0.0002 and -0.011 m in 10 s at
-  mu_s = 0.4, 0.8, 1.2 with mu_d = 0.2; reproduce with `soft-snake evaluate SoftWorm-v0 --policy
-  inching:omega=pi/2 --episodes 1 --env-kwarg ground.mu_s=0.8 --env-kwarg ground.mu_d=0.2
-  --env-kwarg reset_noise_scale=0`).
+- **Friction on land, on the converged contact.** The default gait is the peristaltic pulse
+  (`wave="pulse"`, duty 0.6): it compresses a few edges at a time and anchors the rest on
+  static friction, so it carries the worm about 1.3 m in 10 s at every (mu_s, mu_d) of the
+  grid, open or closed loop. Friction decides what sliding costs more than how far the worm
+  goes: the friction energy is `mu_d m g` times the sliding path and does not depend on mu_s
+  ({land["energy_low"]}). More static friction anchors a little better: at mu_d =
+  {land["mu_d_low"]:.2f} the open-loop distance goes {land["row_low"]} m for mu_s =
+  {land["mu_s_list"]}. More kinetic friction costs a little distance: at mu_s =
+  {land["mu_s_high"]:.2f} the open loop goes {land["col_high"]} m for mu_d = {land["mu_d_list"]}.
+  The sources' sinusoidal wave (`inching:wave=sine`) changes every edge at once, anchors
+  little, and moves the worm a few millimetres in 10 s; the 0.10 m this package once reported
+  for it came from the time step (stick-slip decided at the start of each step anchored nodes
+  that the model lets slip; docs/model.md §5).
 - **Decentralized gains.** See the last section: with (10, 1, 5) the neighbour-to-neighbour
   chain does not settle; with (10, 2, 1) it does, as the thesis describes.
 
@@ -474,9 +474,10 @@ alone, in about half a minute).
 - Open loop is `u = kappa_dot_des + rest_gain (kappa_des - kbar)` with `rest_gain` = 10 1/s: from
   a straight start this brings the rest curvature onto the gait within a few tenths of a second,
   then it is the thesis's `u = kappa_dot_des` (see `soft_snake_gym/policies/open_loop.py`).
-- Inching cells (`inch-friction`): `SoftWorm-v0`, 10 s, default wave eps = 0.3, omega = 2 pi
-  rad/s, delta_l = 2 pi / 9, travelling tail to head, which moves the worm **toward its head**
-  (+x); closed loop Kp = 10 1/s. Distance is the centre-of-mass progress over the episode.
+- Inching cells (`inch-friction`): `SoftWorm-v0`, 10 s, the default gait: the peristaltic
+  pulse, eps = 0.3, omega = 2 pi rad/s, delta_l = 2 pi / 9, duty 0.6, travelling tail to
+  head, which moves the worm **toward its head** (+x); closed loop Kp = 10 1/s. Distance is
+  the centre-of-mass progress over the episode.
 
 ## Sweep timings (this machine, 2 cores shared with other work)
 
@@ -484,9 +485,9 @@ alone, in about half a minute).
 |---|---|---|---|---|
 {timings}
 
-A fresh `soft-snake reproduce --out docs` (no CSVs) took 2 min 37 s of wall time on 2 worker
-processes (the first cell of each worker also pays for importing torch and SB3, about 2 s);
-a rerun with the CSVs in place recomputes nothing and takes about 8 s (the figures).
+The last column is the wall time of each sweep in the run that wrote this page (2 worker
+processes; the first cell of each worker also pays for importing torch and SB3, about 2 s); a
+rerun with the CSVs in place recomputes nothing and only draws the figures.
 
 ## Swimming: amplitude × frequency at E_bend = 1.87e4 Pa
 

@@ -48,9 +48,11 @@ class InchEnv(SoftRobotEnv):
     The same planar discrete elastic rod as ``SoftEel-v0`` (N = 10 nodes, 9 edges of 0.18 m,
     0.8 kg each) lying on a flat floor with Karnopp stick-slip friction (``mu_s = 1.15``,
     ``mu_d = 0.8``; docs/model.md §5), its rest shape straight. The agent moves the rest lengths
-    ``lbar`` of the 9 edges; a compression wave travelling from tail to head
-    (``soft_snake_gym.gaits.length_wave``, eps = 0.3, omega = 2 pi rad/s, delta_l = pi/4) run
-    open loop inches forward at about 8 mm/s. The task is to move along the goal direction (+x by default, the head ahead).
+    ``lbar`` of the 9 edges; a peristaltic compression pulse travelling from tail to head
+    (``soft_snake_gym.gaits.pulse_wave``, eps = 0.3, omega = 2 pi rad/s, delta_l = 2 pi/9,
+    duty 0.6: the ``inching`` baseline) inches forward at about 0.13 m/s, while a sinusoidal
+    wave that changes every edge at once barely moves it. The task is to move along the goal
+    direction (+x by default, the head ahead).
 
     ## Action Space
     A `Box(-1, 1, (N-1,), float32)`: the length rates ``u_l = max_length_rate * action`` [m/s]
