@@ -77,6 +77,19 @@ def _parse_env_kwargs(items: list[str]) -> dict[str, Any]:
     return out
 
 
+def env_kwargs_from_args(args) -> dict[str, Any]:
+    """The env keywords of an episode command: ``--env-kwarg``, ``--env-config`` and
+    ``--max-steps`` (checked) as ``make_eval_env``'s ``env_kwargs``."""
+    env_kwargs = _parse_env_kwargs(args.env_kwarg)
+    if args.env_config:
+        env_kwargs["config"] = args.env_config
+    if args.max_steps is not None:
+        if args.max_steps < 1:
+            raise CLIError(f"--max-steps {args.max_steps} must be at least 1")
+        env_kwargs["max_episode_steps"] = args.max_steps
+    return env_kwargs
+
+
 def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("env_id", help="environment id, e.g. SoftEel-v0 or SoftWorm-v0")
     p.add_argument("--policy", required=True,
@@ -121,17 +134,11 @@ def _evaluate(args: argparse.Namespace) -> int:
             check_video_path(args.video)
         except ValueError as err:
             raise CLIError(f"--video: {err}") from None
-    env_kwargs = _parse_env_kwargs(args.env_kwarg)
+    env_kwargs = env_kwargs_from_args(args)
     if args.start_on_gait:
         if "start_on_gait" in env_kwargs:
             raise CLIError("--start-on-gait takes the gait from the policy; drop --env-kwarg start_on_gait...")
         env_kwargs["start_on_gait"] = policy_gait(args.policy, args.policy_config)
-    if args.env_config:
-        env_kwargs["config"] = args.env_config
-    if args.max_steps is not None:
-        if args.max_steps < 1:
-            raise CLIError(f"--max-steps {args.max_steps} must be at least 1")
-        env_kwargs["max_episode_steps"] = args.max_steps
     env = make_eval_env(args.env_id, seed=args.seed, env_kwargs=env_kwargs,
                         render_mode="rgb_array" if args.video else None)
     inner = env.envs[0]

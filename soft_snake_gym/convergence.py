@@ -378,15 +378,9 @@ def _run(args) -> int:
     import json
     from pathlib import Path
 
-    from soft_snake_gym.cli import CLIError, _parse_env_kwargs
+    from soft_snake_gym.cli import env_kwargs_from_args
 
-    env_kwargs = _parse_env_kwargs(args.env_kwarg)
-    if args.env_config:
-        env_kwargs["config"] = args.env_config
-    if args.max_steps is not None:
-        if args.max_steps < 1:
-            raise CLIError(f"--max-steps {args.max_steps} must be at least 1")
-        env_kwargs["max_episode_steps"] = args.max_steps
+    env_kwargs = env_kwargs_from_args(args)
     result = convergence(args.env_id, args.policy, env_kwargs, args.factors, args.seed, args.transient)
     print(format_convergence(result))
     if args.json:

@@ -122,6 +122,21 @@ def turning(q, j):
     return kappa, g0x, g0y, -g0x - g2x, -g0y - g2y, g2x, g2y, tax, tay, tbx, tby, la, lb
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def edge_frame(q, v, i):
+    """Edge i's length ``l``, unit tangent ``t`` and normal ``n = (-t_y, t_x)``, its mean
+    velocity ``v^i = (v[i] + v[i+1]) / 2`` and that velocity's components ``v_t``, ``v_n``
+    (docs/model.md §2, §4), as (l, tx, ty, nx, ny, vx, vy, vt, vn)."""
+    ex = q[2 * i + 2] - q[2 * i]
+    ey = q[2 * i + 3] - q[2 * i + 1]
+    l = math.sqrt(ex * ex + ey * ey)
+    tx, ty = ex / l, ey / l
+    nx, ny = -ty, tx
+    vx = 0.5 * (v[2 * i] + v[2 * i + 2])
+    vy = 0.5 * (v[2 * i + 1] + v[2 * i + 3])
+    return l, tx, ty, nx, ny, vx, vy, vx * tx + vy * ty, vx * nx + vy * ny
+
+
 @njit(cache=True, error_model="numpy")
 def curvatures(q, kappa):
     """Discrete curvature ``kappa_j = 2 tan(phi_j/2)`` of the interior nodes, (N-2,) [-]."""
@@ -285,15 +300,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
     cn = prm[P_RHO] * prm[P_CD] * prm[P_A]
     power = 0.0
     for i in range(N - 1):
-        ex = q[2 * i + 2] - q[2 * i]
-        ey = q[2 * i + 3] - q[2 * i + 1]
-        l = math.sqrt(ex * ex + ey * ey)
-        tx, ty = ex / l, ey / l
-        nx, ny = -ty, tx
-        vx = 0.5 * (v[2 * i] + v[2 * i + 2])
-        vy = 0.5 * (v[2 * i + 1] + v[2 * i + 3])
-        vt = vx * tx + vy * ty
-        vn = vx * nx + vy * ny
+        l, tx, ty, nx, ny, vx, vy, vt, vn = edge_frame(q, v, i)
         gt = vt + vt * abs(vt)
         gn = vn + vn * abs(vn)
         fx = -ct * l * gt * tx - cn * l * gn * nx
@@ -390,15 +397,7 @@ def fluid_momentum(q, v, prm, R, sp, sg, J, dt, jac):
     cm = prm[P_RHO] * math.pi * prm[P_CA] * prm[P_A] * prm[P_A]
     tf = 0.0
     for i in range(N - 1):
-        ex = q[2 * i + 2] - q[2 * i]
-        ey = q[2 * i + 3] - q[2 * i + 1]
-        l = math.sqrt(ex * ex + ey * ey)
-        tx, ty = ex / l, ey / l
-        nx, ny = -ty, tx
-        vx = 0.5 * (v[2 * i] + v[2 * i + 2])
-        vy = 0.5 * (v[2 * i + 1] + v[2 * i + 3])
-        vt = vx * tx + vy * ty
-        vn = vx * nx + vy * ny
+        l, tx, ty, nx, ny, vx, vy, vt, vn = edge_frame(q, v, i)
         tf += 0.5 * cm * l * vn * vn
         pn = 0.5 * sp * cm * l * vn  # half the edge's momentum to each node
         gt = sg * cm * 0.5 * vn * vn
@@ -440,15 +439,7 @@ def munk_force(q, v, prm, F):
     N = q.size // 2
     cm = prm[P_RHO] * math.pi * prm[P_CA] * prm[P_A] * prm[P_A]
     for i in range(N - 1):
-        ex = q[2 * i + 2] - q[2 * i]
-        ey = q[2 * i + 3] - q[2 * i + 1]
-        l = math.sqrt(ex * ex + ey * ey)
-        tx, ty = ex / l, ey / l
-        nx, ny = -ty, tx
-        vx = 0.5 * (v[2 * i] + v[2 * i + 2])
-        vy = 0.5 * (v[2 * i + 1] + v[2 * i + 3])
-        vt = vx * tx + vy * ty
-        vn = vx * nx + vy * ny
+        l, tx, ty, nx, ny, vx, vy, vt, vn = edge_frame(q, v, i)
         dx = v[2 * i + 2] - v[2 * i]
         dy = v[2 * i + 3] - v[2 * i + 1]
         et = dx * tx + dy * ty
