@@ -3,7 +3,8 @@
 Everything is measured in one run on one machine, so the ratios hold even when the absolute
 numbers move with the load:
 
-(a) ``gym.make("SoftEel-v0")``, one env with Gymnasium's standard wrappers;
+(a) ``gym.make("SoftEel-v0")`` and ``gym.make("SoftWorm-v0")``, one env each with Gymnasium's
+    standard wrappers;
 (b) the batched vector env (``gym.make_vec``) at 1, 16, 256 and 1024 robots, with one thread
     and, from 128 robots (where the env's default uses them), with every core;
 (c) ``gym.make("Swimmer-v5")`` and a ``SyncVectorEnv`` of it (needs ``mujoco``: the ``bench``
@@ -41,7 +42,12 @@ __all__ = ["run_benchmark", "format_report", "plot_benchmark", "DEFAULT_ROBOTS",
 
 DEFAULT_ROBOTS = (1, 16, 256, 1024)
 DEFAULT_NODES = (10, 20, 50, 100)
-TARGETS = {"single_vs_swimmer": 2.0, "batched256_vs_swimmer": 10.0, "ppo_batched_vs_subproc": 1.5}
+TARGETS = {
+    "single_vs_swimmer": 2.0,
+    "worm_single_vs_swimmer": 2.0,
+    "batched256_vs_swimmer": 10.0,
+    "ppo_batched_vs_subproc": 1.5,
+}
 
 
 # --- throughput cases ------------------------------------------------------------------------
@@ -225,6 +231,7 @@ def run_benchmark(
     cases: dict[str, Any] = {}
     say("building the environments")
     cases["SoftEel-v0 gym.make"] = _SingleCase("SoftEel-v0")
+    cases["SoftWorm-v0 gym.make"] = _SingleCase("SoftWorm-v0")
     for n in robots:
         # all cores only where the env's default would use them (>= 2 x ROBOTS_PER_THREAD robots)
         for threads in sorted({1, all_threads if n >= 2 * ROBOTS_PER_THREAD else 1}):
@@ -306,6 +313,9 @@ def _ratios(res: dict[str, Any]) -> dict[str, Any]:
     gait = _rate(res, "SoftEel-v0 batched n=256 threads=1, gait actions")
     if swimmer:
         out["single_vs_swimmer"] = single / swimmer
+        worm = _rate(res, "SoftWorm-v0 gym.make")
+        if worm:
+            out["worm_single_vs_swimmer"] = worm / swimmer
         if batched:
             best = max(batched, key=batched.get)
             out["batched256_vs_swimmer"] = batched[best] / swimmer
@@ -353,6 +363,7 @@ def format_report(res: dict[str, Any]) -> str:
     ratios = res["ratios"]
     lines += ["", "targets (ratios measured in this run):"]
     names = {"single_vs_swimmer": "SoftEel-v0 single env / Swimmer-v5 single env",
+             "worm_single_vs_swimmer": "SoftWorm-v0 single env / Swimmer-v5 single env",
              "batched256_vs_swimmer": "batched env, 256 robots / Swimmer-v5 single env",
              "ppo_batched_vs_subproc": "PPO steps/s, batched / SubprocVecEnv"}
     for key, target in TARGETS.items():

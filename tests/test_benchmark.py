@@ -16,7 +16,7 @@ def test_benchmark_cli_writes_json_and_png(tmp_path, capsys):
     res = json.loads(out.read_text())
     assert (tmp_path / "bench.png").stat().st_size > 10_000
     cases = [r["case"] for r in res["throughput"]]
-    assert cases[:2] == ["SoftEel-v0 gym.make", "SoftEel-v0 batched n=2 threads=1"]
+    assert cases[:3] == ["SoftEel-v0 gym.make", "SoftWorm-v0 gym.make", "SoftEel-v0 batched n=2 threads=1"]
     assert all(r["steps_per_s"] > 0 for r in res["throughput"])
     assert [r["N"] for r in res["nodes"]] == [10, 12]
     assert 0 < res["kernel_share"]["SoftEel-v0 batched n=2 threads=1"] < 1
@@ -24,7 +24,7 @@ def test_benchmark_cli_writes_json_and_png(tmp_path, capsys):
     assert "targets (ratios measured in this run)" in text and str(out) in text
     if res["mujoco"] == "installed":
         assert "Swimmer-v5 gym.make" in cases
-        assert res["ratios"]["single_vs_swimmer"] > 0
+        assert res["ratios"]["single_vs_swimmer"] > 0 and res["ratios"]["worm_single_vs_swimmer"] > 0
     else:
         assert "Swimmer-v5 rows skipped" in text
 
