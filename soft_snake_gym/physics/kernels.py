@@ -783,18 +783,22 @@ def _be_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
         if not band_lu(J, piv, n):
             return NOT_CONVERGED, it, rmax, p_fluid, p_fric
         band_solve(J, piv, n, dv)
+        # backtracking line search on |R|^2. In water most steps converge after one Newton
+        # iteration, so trials skip the Jacobian; on the ground a pass takes several, so the
+        # full step's trial assembles it too and, accepted, serves the next iteration
+        fused = medium == MEDIUM_GROUND
         step = 1.0
-        for _ in range(12):  # backtracking line search on |R|^2 (residuals only: no Jacobian)
+        for _ in range(12):
             for i in range(n):
                 v[i] = vacc[i] + step * dv[i]
-            trial = _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, False)
+            trial = _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, fused and step == 1.0)
             if trial[0] < norm2 * (1.0 - 1e-4 * step):
                 break
             step *= 0.5
         norm2, rmax, p_fluid, p_fric = trial
-        if rmax > tol and pass_it < maxit and math.isfinite(norm2):
+        if rmax > tol and pass_it < maxit and math.isfinite(norm2) and not (fused and step == 1.0):
             # another iteration follows: the Jacobian at the accepted velocity (the residual
-            # is recomputed bit for bit; most steps converge here and skip this assembly)
+            # is recomputed bit for bit)
             _be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium, True)
     return OK, it, rmax, p_fluid, p_fric
 
