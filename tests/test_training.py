@@ -146,21 +146,16 @@ def test_hyperparameter_file_is_plain_yaml_keyed_by_env_id():
 @pytest.mark.parametrize("env_id,baseline", [("SoftEel-v0", "pid"), ("SoftWorm-v0", "inching-pid")])
 def test_shipped_agents_beat_their_baselines(env_id, baseline):
     """The agents in soft_snake_gym/zoo do what docs/training.md says, on a seed they were not
-    selected on: the eel is faster than the PID at a lower cost of transport, the worm goes
-    further than the closed-loop inching wave."""
+    selected on: the eel swims faster than the PID (at a higher cost of transport: pricing
+    energy so that it also beats the PID's is still open), the worm goes further than the
+    closed-loop peristaltic pulse."""
     from soft_snake_gym.compare import compare
 
-    # the shipped eel was trained with the sources' added-mass form, which it exploits (issue 9:
-    # about 6 % of its energy came from it); on the energy-consistent default it swims 1.11 m
-    # against the PID's 1.23 m in this episode, so the claim is checked on its training physics
-    # until the agent is retrained
-    kwargs = {"fluid": {"added_mass": "kelasidi"}} if env_id == "SoftEel-v0" else None
-    res = compare(env_id, ["zoo:ppo", baseline], episodes=1, seed=42, env_kwargs=kwargs)
+    res = compare(env_id, ["zoo:ppo", baseline], episodes=1, seed=42)
     agent, base = res["zoo:ppo"], res[baseline]
-    assert agent["distance"][0] > base["distance"][0]
+    assert agent["distance"][0] > 1.1 * base["distance"][0]
     if env_id == "SoftEel-v0":
-        assert agent["average_speed"][0] > base["average_speed"][0]
-        assert agent["cost_of_transport"][0] <= base["cost_of_transport"][0]
+        assert agent["average_speed"][0] > 1.1 * base["average_speed"][0]
 
 
 # --- issue 15: nothing written before every check passed, exact step counts, SIGTERM ------------

@@ -6,7 +6,7 @@ its own evaluation seeds, in its last stage) with its VecNormalize statistics an
 the package, plots the learning curves, and compares the shipped
 agents with the baselines on 10 seeds.
 
-    python training/make_zoo.py                 # everything (about 40 min on 2 cores)
+    python training/make_zoo.py                 # everything (about an hour on 2 cores)
     python training/make_zoo.py --skip-training # only copy, plot and compare existing runs
 """
 
@@ -25,10 +25,11 @@ DOCS = ROOT / "docs" / "img"
 #: env id -> list of soft-snake train argument lists (later ones resume the run)
 STAGES = {
     "SoftEel-v0": [
-        ["--n-timesteps", "300000", "--hyperparams", "env_kwargs.energy_cost_weight=0.001"],
-        ["--n-timesteps", "1000000", "--hyperparams", "env_kwargs.energy_cost_weight=0.011"],
+        # learn to swim with no price on energy, then price it
+        ["--n-timesteps", "400000", "--hyperparams", "env_kwargs.energy_cost_weight=0.0"],
+        ["--n-timesteps", "2200000", "--hyperparams", "env_kwargs.energy_cost_weight=0.002"],
     ],
-    "SoftWorm-v0": [[]],
+    "SoftWorm-v0": [["--n-timesteps", "1500000"]],
 }
 
 
