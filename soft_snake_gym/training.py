@@ -28,6 +28,7 @@ import difflib
 import inspect
 import json
 import math
+import os
 import platform
 import shlex
 import signal
@@ -476,22 +477,46 @@ def _make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start
     return CallbackList([Checkpoint(), BaselineEval()])
 
 
+@contextlib.contextmanager
+def _signals_held():
+    """Ctrl-C and SIGTERM wait until the block ends (a save is never cut in half); on
+    platforms without ``pthread_sigmask`` the block runs as is."""
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = {signal.SIGINT, signal.SIGTERM}
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)  # a held signal is delivered here
+
+
 def save_checkpoint(model, run_dir: Path, started: float | None = None) -> Path:
     """Save the model and its VecNormalize statistics under ``checkpoints/``; with
     ``started`` (the run's ``time.time()`` origin) also the wall time so far, so that a
-    resumed run's learning curve continues the clock (``checkpoints/wall_s.json``)."""
+    resumed run's learning curve continues the clock (``checkpoints/wall_s.json``).
+
+    Each file is written under a temporary name and renamed, with Ctrl-C and SIGTERM held
+    meanwhile: an interrupt never leaves a half-written checkpoint for ``--resume`` to find.
+    """
     ckdir = run_dir / "checkpoints"
     ckdir.mkdir(parents=True, exist_ok=True)
     steps = model.num_timesteps
     path = ckdir / f"model_{steps}_steps.zip"
-    model.save(path)
-    vn = model.get_vec_normalize_env()
-    if vn is not None:
-        vn.save(str(ckdir / f"vecnormalize_{steps}_steps.pkl"))
-    if started is not None:
-        walls = _checkpoint_walls(run_dir)
-        walls[str(steps)] = round(time.time() - started, 1)
-        (ckdir / "wall_s.json").write_text(json.dumps(walls, indent=1) + "\n")
+    with _signals_held():
+        partial = ckdir / f"model_{steps}_steps.partial.zip"
+        model.save(partial)
+        vn = model.get_vec_normalize_env()
+        if vn is not None:
+            stats = ckdir / f"vecnormalize_{steps}_steps.pkl"
+            vn.save(str(stats.with_suffix(".partial")))
+            os.replace(stats.with_suffix(".partial"), stats)
+        os.replace(partial, path)
+        if started is not None:
+            walls = _checkpoint_walls(run_dir)
+            walls[str(steps)] = round(time.time() - started, 1)
+            (ckdir / "wall_s.json").write_text(json.dumps(walls, indent=1) + "\n")
     return path
 
 
