@@ -55,8 +55,6 @@ KNOWN_FAILING = {
     "curvature error 0.0155, 0.0182, 0.0218",
     ("SoftEel-v0", "random"): "fluid power 5.39, 6.02, 6.25 W (13.7 %; first order, 6.32 W at h/64): "
     "rates that jump every step excite modes that backward Euler damps at h = 0.01 s",
-    ("SoftWorm-v0", "zoo:ppo"): "distance 2.00, 1.55, 0.96 m: the agent's length rates chatter from step "
-    "to step, and part of its anchoring comes from the step (as for random actions)",
     ("SoftWorm-v0", "random"): "friction energy 72.9, 94.4, 135.3 J: stretching rings at 950 rad/s after "
     "every jump of the rates, which h = 0.01 s cannot resolve",
 }
