@@ -41,9 +41,6 @@ __all__ = [
 SLOW_SUBSTEPS = 1000
 """Explicit sub-steps per integrator step above which an env warns that it will be slow."""
 
-_LEDGER = slice(K.O_LEDGER, K.O_LEDGER + K.N_LEDGER)  # info["energy"] in the diagnostics
-
-
 # --- settings ---------------------------------------------------------------------------------
 def _check_number(cls: str, name: str, value: Any, lo: float | None = None, lo_open: bool = False) -> None:
     number = plain_number(value)
@@ -266,7 +263,7 @@ class SoftRobotEnv(gym.Env):
         if settings.integrator.method == "symplectic_euler" and n > SLOW_SUBSTEPS:
             warnings.warn(
                 f"{self.env_id}: integrator.method = 'symplectic_euler' takes {n:,} sub-steps per "
-                f"h = {settings.integrator.h:g} s for this rod (its stiffest stretching mode), so every "
+                f"h = {settings.integrator.h:g} s for this rod (its stiffest elastic mode or its damping), so every "
                 "step is slow; use 'backward_euler' (one implicit step per h) or a softer or "
                 "coarser rod",
                 stacklevel=2,
@@ -479,7 +476,7 @@ class SoftRobotEnv(gym.Env):
         info.update(zip(T.TERM_KEYS, r[T.R_RF : T.R_RFAIL + 1], strict=True))
         info["failure"] = self._failure
         info["metrics"] = dict(zip(self._metric_keys, r[T.M_AVG :], strict=True))
-        info["energy"] = dict(zip(K.LEDGER_KEYS, self._phys[8][_LEDGER].tolist(), strict=True))
+        info["energy"] = self.sim.energy_ledger()
         if self.render_mode is not None and ok:
             self._record_trail()
         if self.render_mode == "human":

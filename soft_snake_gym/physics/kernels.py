@@ -825,10 +825,10 @@ def _symplectic_substep(q, v, kbar, lbar, prm, buf, J, ibuf, dt, medium):
         v[i] += dt * a[i]
     if medium == MEDIUM_GROUND:
         state = ibuf[I_FRICTION]
+        stop = dt * prm[P_G]  # the speed a friction coefficient of 1 removes in dt
         for i in range(n // 2):
             r0, r1 = 2 * i, 2 * i + 1
             w = math.hypot(v[r0], v[r1])
-            stop = dt * prm[P_G]  # the speed a friction coefficient of 1 removes in dt
             if w <= prm[P_MUS] * stop:
                 state[i] = STUCK
                 v[r0] = 0.0
