@@ -214,8 +214,7 @@ def evaluate(
     """
     from stable_baselines3.common.evaluation import evaluate_policy
 
-    if not (isinstance(transient, (int, float)) and math.isfinite(transient) and transient >= 0):
-        raise ValueError(f"transient = {transient!r} s must be a finite number >= 0")
+    check_transient(transient, math.inf)  # a transient longer than the episode averages it all
     if video is not None:
         check_video_path(video)
     inner = env.envs[0].unwrapped
@@ -302,7 +301,8 @@ def gait_rate_warning(policy: Any, env: Any) -> str | None:
         limit, name, unit = inner.max_curvature_rate, "max_curvature_rate", "1/s"
         gait = f"alpha = {alpha:g} rad, omega = {omega:g} rad/s"
     elif hasattr(params, "eps") and hasattr(inner, "max_length_rate"):
-        peak = 0.5 * inner.base_config.rod.edge_length * params.eps * omega
+        # the policy's own edge length and duty: a pulse's peak rate grows as 1/duty
+        peak = 0.5 * policy.l0 * params.eps * omega / policy.duty
         limit, name, unit = inner.max_length_rate, "max_length_rate", "m/s"
         gait = f"eps = {params.eps:g}, omega = {omega:g} rad/s"
     else:

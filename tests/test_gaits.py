@@ -129,3 +129,13 @@ def test_the_worm_holds_the_edges_outside_the_pulse_at_rest_length():
     assert steady.mean() == pytest.approx(duty * N_EDGES, abs=0.6)
     ep = evaluate(policy, venv, episodes=1)[0]
     assert ep["distance"] > 0.05 and ep["failure"] == ""
+
+
+def test_evaluate_knows_the_pulse_rate_grows_with_one_over_duty():
+    from soft_snake_gym.evaluation import gait_rate_warning
+
+    env = gym.make("SoftWorm-v0")  # max_length_rate 0.3 m/s; the pulse peaks at 0.17 m/s / duty
+    assert gait_rate_warning(make_policy("inching:wave=pulse,duty=0.6", env), env) is None
+    with pytest.warns(UserWarning):  # the policy's own warning at construction
+        fast = make_policy("inching:wave=pulse,duty=0.3", env)
+    assert "0.565 m/s, beyond the env's max_length_rate" in gait_rate_warning(fast, env)
