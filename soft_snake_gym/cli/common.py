@@ -1,0 +1,68 @@
+"""What every ``soft-snake`` command shares: the user-error type, the one-line argument parser and
+the env keywords of an episode command."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+import gymnasium
+
+from soft_snake_gym.config import ConfigError
+from soft_snake_gym.policies import PolicyEnvMismatch
+from soft_snake_gym.policies.base import parse_value
+
+__all__ = ["CLIError", "Parser", "USER_ERRORS", "add_env_arguments", "env_kwargs_from_args"]
+
+
+class CLIError(Exception):
+    """An expected, user-facing problem: printed as one line, exit code 2."""
+
+
+#: Exception types that mean "the user asked for something impossible": one line, exit code 2.
+USER_ERRORS: tuple[type[BaseException], ...] = (
+    CLIError, ConfigError, PolicyEnvMismatch, gymnasium.error.Error, FileNotFoundError, ValueError,
+)
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line on stderr (exit code 2)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def add_env_arguments(p: argparse.ArgumentParser) -> None:
+    """``--max-steps``, ``--env-config`` and ``--env-kwarg``: the env of an episode command."""
+    p.add_argument("--max-steps", type=int, help="episode length in control steps (default: the id's)")
+    p.add_argument("--env-config", metavar="YAML", help="YAML file of env keywords")
+    p.add_argument("--env-kwarg", action="append", metavar="KEY=VALUE",
+                   help="env keyword, repeatable; dotted keys reach sections (rod.E_bend=1.87e4)")
+
+
+def _parse_env_kwargs(items: list[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items or []:
+        key, eq, value = item.partition("=")
+        if not eq:
+            raise CLIError(f"--env-kwarg {item!r} is not key=value; write e.g. --env-kwarg dt=0.02")
+        # dotted keys build nested sections: rod.E_bend=1.87e4 -> {"rod": {"E_bend": ...}}
+        node = out
+        parts = key.strip().split(".")
+        for p in parts[:-1]:
+            node = node.setdefault(p, {})
+        node[parts[-1]] = parse_value(value)
+    return out
+
+
+def env_kwargs_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The env keywords of an episode command: ``--env-kwarg``, ``--env-config`` and
+    ``--max-steps`` (checked) as ``make_eval_env``'s ``env_kwargs``."""
+    env_kwargs = _parse_env_kwargs(args.env_kwarg)
+    if args.env_config:
+        env_kwargs["config"] = args.env_config
+    if args.max_steps is not None:
+        if args.max_steps < 1:
+            raise CLIError(f"--max-steps {args.max_steps} must be at least 1")
+        env_kwargs["max_episode_steps"] = args.max_steps
+    return env_kwargs
