@@ -4,4 +4,5 @@ import sys
 
 from soft_snake_gym.cli import main
 
-sys.exit(main())
+if __name__ == "__main__":  # not in the worker processes that re-import the main module
+    sys.exit(main())
