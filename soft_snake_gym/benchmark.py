@@ -1,4 +1,4 @@
-"""``soft-snake benchmark``: steps per second, side by side with MuJoCo's ``Swimmer-v5``.
+"""Steps per second, side by side with MuJoCo's ``Swimmer-v5`` (the library of ``soft-snake benchmark``).
 
 Everything is measured in one run on one machine, so the ratios hold even when the absolute
 numbers move with the load:
@@ -24,9 +24,8 @@ Results go to a JSON file and a PNG figure.
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
+import os
 import platform
 import statistics
 import time
@@ -36,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from soft_snake_gym.cli import CLIError, subcommand
+from soft_snake_gym.config import load_yaml, shipped_configs
 
 __all__ = ["run_benchmark", "format_report", "plot_benchmark", "DEFAULT_ROBOTS", "DEFAULT_NODES"]
 
@@ -135,11 +134,7 @@ def _have_mujoco() -> str | None:
 # --- PPO --------------------------------------------------------------------------------------
 def _ppo_settings(env_id: str) -> tuple[int, dict[str, Any], dict[str, Any]]:
     """n_envs, PPO keywords and env keywords of the package's PPO config for ``env_id``."""
-    import yaml
-
-    from soft_snake_gym.training import CONFIGS
-
-    cfg = dict(yaml.safe_load((CONFIGS / "ppo.yml").read_text())[env_id])
+    cfg = dict(load_yaml(shipped_configs("algorithm")["ppo"])[env_id])
     n_envs = int(cfg.pop("n_envs", 8))
     env_kwargs = dict(cfg.pop("env_kwargs", {}) or {})
     run_keys = ("n_timesteps", "normalize", "policy", "vec_env", "eval_freq", "eval_episodes",
@@ -277,7 +272,7 @@ def run_benchmark(
 
     res: dict[str, Any] = {
         "machine": {"platform": platform.platform(), "processor": platform.processor(),
-                    "cpus": __import__("os").cpu_count(), "numba_threads": all_threads,
+                    "cpus": os.cpu_count(), "numba_threads": all_threads,
                     "threading_layer": _threading_layer()},
         "settings": {"seconds": seconds, "repeats": repeats, "sync_robots": sync_robots,
                      "ppo_timesteps": ppo_timesteps, "node_robots": node_robots},
@@ -424,53 +419,3 @@ def plot_benchmark(res: dict[str, Any], path: str | Path) -> Path:
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
-
-
-# --- CLI --------------------------------------------------------------------------------------
-def _arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seconds", type=float, default=1.0, help="seconds per case per round (default 1)")
-    p.add_argument("--repeats", type=int, default=3, help="interleaved rounds; the median is reported (default 3)")
-    p.add_argument("--robots", type=int, nargs="+", default=list(DEFAULT_ROBOTS),
-                   help="robot counts of the batched env (default 1 16 256 1024)")
-    p.add_argument("--sync-robots", type=int, default=16, help="Swimmer-v5 SyncVectorEnv size (default 16)")
-    p.add_argument("--no-ppo", action="store_true", help="skip the PPO training comparison")
-    p.add_argument("--ppo-timesteps", type=int, default=8192, help="timed PPO steps per env kind (default 8192)")
-    p.add_argument("--ppo-n-envs", type=int, default=None, help="PPO n_envs (default: the PPO config's, 8)")
-    p.add_argument("--nodes", type=int, nargs="*", default=list(DEFAULT_NODES),
-                   help="node counts for the cost-against-N rows (default 10 20 50 100)")
-    p.add_argument("--node-robots", type=int, default=64, help="robots in the cost-against-N rows (default 64)")
-    p.add_argument("--json", default="benchmark.json", help="results file (default benchmark.json)")
-    p.add_argument("--png", default=None, help="figure (default: the JSON's name with .png)")
-    p.add_argument("--quiet", action="store_true", help="no progress messages")
-
-
-@subcommand("benchmark", "steps per second of the envs, batched env, PPO, against MuJoCo's Swimmer-v5",
-            _arguments)
-def _benchmark(args: argparse.Namespace) -> int:
-    import sys
-
-    if args.seconds <= 0 or args.repeats < 1:
-        raise CLIError(f"--seconds {args.seconds} and --repeats {args.repeats}: need seconds > 0 and repeats >= 1")
-    bad = [n for n in args.robots + [args.sync_robots, args.node_robots] if n < 1] + [N for N in args.nodes if N < 3]
-    if bad:
-        raise CLIError(f"robot counts must be >= 1 and node counts >= 3; got {bad}")
-    if args.ppo_timesteps < 1:
-        raise CLIError(f"--ppo-timesteps {args.ppo_timesteps}: need >= 1")
-
-    def progress(msg: str) -> None:
-        if not args.quiet:
-            print(f"[benchmark] {msg}", file=sys.stderr, flush=True)
-
-    res = run_benchmark(seconds=args.seconds, repeats=args.repeats, robots=tuple(args.robots),
-                        sync_robots=args.sync_robots, ppo=not args.no_ppo, ppo_timesteps=args.ppo_timesteps,
-                        ppo_n_envs=args.ppo_n_envs, nodes=tuple(args.nodes), node_robots=args.node_robots,
-                        progress=progress)
-    report = format_report(res)
-    res["report"] = report
-    json_path = Path(args.json)
-    json_path.parent.mkdir(parents=True, exist_ok=True)
-    json_path.write_text(json.dumps(res, indent=2))
-    png = plot_benchmark(res, args.png or json_path.with_suffix(".png"))
-    print(report)
-    print(f"\nwrote {json_path} and {png}")
-    return 0

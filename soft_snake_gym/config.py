@@ -5,6 +5,11 @@ mapping); ``from_dict`` builds a dataclass, recursing into nested dataclass fiel
 rejecting unknown keys with the closest valid name; ``with_preset`` lays a named preset
 (a YAML file of simulator sections shipped in ``soft_snake_gym/configs/presets``) beneath a
 mapping. Nothing is ``eval``'d.
+
+:func:`parse_value` and :func:`parse_assignments` are the one ``key=value`` grammar of the
+command line and of policy specs (``--env-kwarg``, ``--hyperparams``, ``pid:alpha=pi/6``), and
+:func:`config_path` finds a config shipped in ``soft_snake_gym/configs/{env,policy,algorithm}``
+by name (``"softeel"``) or takes a path.
 """
 
 from __future__ import annotations
@@ -12,9 +17,11 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import inspect
+import math
 import re
 import types
 import typing
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -23,8 +30,13 @@ import yaml
 from soft_snake_gym.params import SimConfig, plain_number
 
 __all__ = [
+    "CONFIG_KINDS",
     "ConfigError",
+    "config_path",
     "load_yaml",
+    "parse_assignments",
+    "parse_value",
+    "shipped_configs",
     "from_dict",
     "to_dict",
     "load_sim_config",
@@ -220,6 +232,123 @@ def load_sim_config(path: str | Path) -> SimConfig:
     the file's sections, see :func:`with_preset`)."""
     where = Path(path).name
     return from_dict(SimConfig, with_preset(load_yaml(path), where), where=where)
+
+
+# --- key=value: the one grammar ----------------------------------------------------------------
+def _number(text: str) -> int | float | None:
+    """``text`` as a number: an integer or float literal (``2``, ``0.5``, ``1e4``, ``inf``) or a
+    product/quotient of such numbers and ``pi`` (``pi/6``, ``2*pi/3``); None if it is not one."""
+    try:
+        return int(text) if text.lstrip("+-").isdigit() else float(text)
+    except ValueError:
+        pass
+    value, op = 1.0, "*"
+    factors = text.replace("/", " / ").replace("*", " * ").split()
+    for i, factor in enumerate(factors):
+        if factor in ("*", "/"):
+            op = factor
+            continue
+        try:
+            num = math.pi if factor.lower() == "pi" else float(factor)
+        except ValueError:
+            return None
+        value = num if i == 0 else (value * num if op == "*" else value / num)
+    return value if factors else None
+
+
+def parse_value(text: str) -> Any:
+    """The value of one ``key=value`` item, in the grammar every ``key=value`` of the package uses.
+
+    In order: a number (``0.5``, ``1e4``, ``inf``, ``pi``, ``pi/6``, ``2*pi/3``); else a YAML
+    value read with the package's loader (``true``, ``null``, ``[128, 128]``, ``{a: 1}``; an
+    empty value is ``None``); else the text itself, stripped (``pacemaker``). The text never
+    fails to parse: whether the value fits its key is the receiving dataclass's check.
+    """
+    s = text.strip()
+    number = _number(s)
+    if number is not None:
+        return number
+    try:
+        value = yaml.load(s, Loader=_Loader)  # noqa: S506 - SafeLoader subclass
+    except yaml.YAMLError:
+        return s
+    return s if isinstance(value, str) else value
+
+
+def parse_assignments(items: Iterable[str] | None, usage: str, nested: bool = True,
+                      sep: str | None = None) -> dict[str, Any]:
+    """``key=value`` items as a mapping, values by :func:`parse_value`.
+
+    Args:
+        items: the items (``["dt=0.02", "rod.E_bend=1.87e4"]``), or None.
+        usage: the error message for an item that is not ``key=value``, with ``{item}`` where
+            the item goes, quoted (``"--env-kwarg {item} is not key=value; write e.g. ..."``).
+        nested: dotted keys build nested sections (``rod.E_bend=1`` -> ``{"rod": {"E_bend": 1}}``);
+            if False a dotted key stays one key.
+        sep: if given, each item is first split at ``sep`` (``","`` for ``pid:alpha=0.5,omega=2``);
+            empty pieces are skipped.
+
+    Raises:
+        ConfigError: an item without ``=`` or with an empty key.
+    """
+    out: dict[str, Any] = {}
+    pieces = [p for item in items or [] for p in (item.split(sep) if sep else [item])]
+    for item in pieces:
+        if sep is not None:
+            item = item.strip()
+            if not item:
+                continue
+        key, eq, value = item.partition("=")
+        if not eq or not key.strip():
+            raise ConfigError(usage.replace("{item}", repr(item)))
+        parts = key.strip().split(".") if nested else [key.strip()]
+        node = out
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node[parts[-1]] = parse_value(value)
+    return out
+
+
+# --- shipped configs ----------------------------------------------------------------------------
+CONFIG_DIR = Path(__file__).parent / "configs"
+
+#: The kinds of config shipped in ``soft_snake_gym/configs/<kind>/``: env keywords
+#: (``gym.make(id, config=...)``), a baseline's parameters (``--policy-config``), and
+#: hyperparameters keyed by env id (``soft-snake train --config``).
+CONFIG_KINDS = ("env", "policy", "algorithm")
+
+
+def shipped_configs(kind: str) -> dict[str, Path]:
+    """Name -> file of the configs of ``kind`` (one of :data:`CONFIG_KINDS`) in the package."""
+    if kind not in CONFIG_KINDS:
+        raise ValueError(f"config kind {kind!r} must be one of {', '.join(CONFIG_KINDS)}")
+    folder = CONFIG_DIR / kind
+    return {p.stem: p for p in sorted(folder.glob("*.y*ml")) if p.suffix in (".yaml", ".yml")}
+
+
+def config_path(config: str | Path, kind: str) -> Path:
+    """The file of ``config``: a shipped config of ``kind`` by name (``"softeel"``), or a path.
+
+    A name is anything without a folder separator or a ``.yaml``/``.yml`` suffix that is not an
+    existing file; everything else is taken as a path (whose absence :func:`load_yaml` reports).
+
+    Raises:
+        ConfigError: a name that is no shipped config of ``kind`` (the message lists them).
+    """
+    path = Path(config)
+    text = str(config)
+    if isinstance(config, Path) or path.suffix in (".yaml", ".yml") or "/" in text or "\\" in text \
+            or path.exists():
+        return path
+    shipped = shipped_configs(kind)
+    if text in shipped:
+        return shipped[text]
+    close = difflib.get_close_matches(text, list(shipped), n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    raise ConfigError(
+        f"{kind} config {text!r} is neither a file nor a config shipped with the package{hint}; "
+        f"shipped {kind} configs: {', '.join(shipped)}; or give the path of a YAML file"
+    )
 
 
 # --- presets ------------------------------------------------------------------------------------

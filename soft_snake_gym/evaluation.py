@@ -1,11 +1,14 @@
 """The one metrics module: run episodes of any policy through SB3's ``evaluate_policy`` and
-collect per-episode metrics (docs/model.md §8).
+collect per-episode metrics (docs/model.md §8), named, labelled and given units once in the
+registry :data:`METRICS`.
 
 Per episode:
 
 - ``return``: the sum of rewards; ``steps``; ``duration`` [s];
 - ``average_speed`` [m/s]: centre-of-mass progress along the goal per time, over the window
-  after ``transient`` seconds (the whole episode if it is shorter than twice that);
+  after ``transient`` seconds (the whole episode if it is shorter than twice that); not the
+  env's ``info["metrics"]["average_speed"]``, which is over the whole episode (the registry
+  :data:`METRICS` names that one ``episode_speed``);
 - ``com_speed`` [m/s]: the centre of mass's displacement over the same window, whatever its
   direction, divided by the window's duration (docs/model.md §8's average speed; equal to
   ``average_speed`` for a robot that swims straight along the goal);
@@ -33,25 +36,77 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["EpisodeRecorder", "evaluate", "make_eval_env", "summarize", "format_table", "COLUMNS",
-           "check_video_path", "check_transient", "gait_rate_warning"]
+__all__ = ["EpisodeRecorder", "evaluate", "make_eval_env", "summarize", "format_table", "COLUMNS", "METRICS",
+           "Metric", "TABLE", "metric_columns", "check_video_path", "check_transient", "gait_rate_warning"]
 
 VIDEO_FPS = 25
 """Frames per second of ``--video`` (the env renders only the frames kept)."""
 
-#: (key, label, unit) of the summary table, in order; rows whose key is absent are skipped.
-COLUMNS = [
-    ("return", "return", "-"),
-    ("average_speed", "average speed", "m/s"),
-    ("distance", "distance", "m"),
-    ("curvature_error", "curvature error", "-"),
-    ("length_error", "length error", "m"),
-    ("mean_fluid_power", "fluid power", "W"),
-    ("energy_fluid", "fluid energy", "J"),
-    ("energy_friction", "friction energy", "J"),
-    ("energy_actuator", "actuator energy", "J"),
-    ("cost_of_transport", "cost of transport", "-"),
-]
+@dataclass(frozen=True)
+class Metric:
+    """One episode metric of the registry :data:`METRICS`.
+
+    Attributes:
+        name: the registry's name, unique.
+        label: how tables, charts and reports call it ("average speed").
+        unit: SI unit ("m/s"), or "-" for a dimensionless number.
+        window: ``"transient"``: averaged after the transient (over the whole episode if the
+            episode is shorter than twice the transient, see :class:`EpisodeRecorder`);
+            ``"episode"``: over the whole episode.
+        source: ``"evaluation"``: a key of :func:`evaluate`'s episode dicts, hence of
+            ``soft-snake evaluate --json`` and the sweep CSVs; ``"env"``: a key of the env's
+            ``info["metrics"]`` that evaluation does not pass on under that meaning.
+        key: the key under which it is written, if not ``name``.
+    """
+
+    name: str
+    label: str
+    unit: str
+    window: str
+    source: str = "evaluation"
+    key: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.key:
+            object.__setattr__(self, "key", self.name)
+
+
+#: Every episode metric, by name: the one list that tables, charts, sweeps and checks draw on.
+#:
+#: Two speeds share the key ``average_speed`` and are told apart here by name: ``average_speed``
+#: (evaluation, JSON, CSV) is the mean of ``info["forward_speed"]`` after the transient, while
+#: ``episode_speed`` is the env's ``info["metrics"]["average_speed"]``, progress along the goal
+#: over the whole episode divided by its duration (``distance / duration``). Both keys stay as
+#: they are (files and ``info`` keep their meaning); code that means one of them names it here.
+METRICS: dict[str, Metric] = {m.name: m for m in (
+    Metric("return", "return", "-", "episode"),
+    Metric("average_speed", "average speed", "m/s", "transient"),
+    Metric("com_speed", "centre-of-mass speed", "m/s", "transient"),
+    Metric("distance", "distance", "m", "episode"),
+    Metric("curvature_error", "curvature error", "-", "transient"),
+    Metric("length_error", "length error", "m", "transient"),
+    Metric("mean_fluid_power", "fluid power", "W", "episode"),
+    Metric("window_fluid_power", "fluid power after the transient", "W", "transient"),
+    Metric("energy_fluid", "fluid energy", "J", "episode"),
+    Metric("energy_friction", "friction energy", "J", "episode"),
+    Metric("energy_actuator", "actuator energy", "J", "episode"),
+    Metric("cost_of_transport", "cost of transport", "-", "episode"),
+    Metric("duration", "duration", "s", "episode"),
+    Metric("episode_speed", "average speed over the episode", "m/s", "episode", source="env",
+           key="average_speed"),
+)}
+
+#: The metrics of ``soft-snake evaluate``'s table, in order; rows whose key is absent are skipped.
+TABLE = ("return", "average_speed", "distance", "curvature_error", "length_error", "mean_fluid_power",
+         "energy_fluid", "energy_friction", "energy_actuator", "cost_of_transport")
+
+#: (key, label, unit) of the summary table, in order (from :data:`METRICS`).
+COLUMNS = [(METRICS[n].key, METRICS[n].label, METRICS[n].unit) for n in TABLE]
+
+
+def metric_columns(names: tuple[str, ...] | list[str]) -> list[tuple[str, str, str]]:
+    """(key, label, unit) of the metrics ``names`` of :data:`METRICS`, in that order."""
+    return [(METRICS[n].key, METRICS[n].label, METRICS[n].unit) for n in names]
 
 
 def make_eval_env(
@@ -351,7 +406,7 @@ def summarize(episodes: list[dict[str, Any]]) -> dict[str, tuple[float, float]]:
 
 def format_table(summary: dict[str, tuple[float, float]], title: str = "") -> str:
     """A plain-text table: metric, unit, mean ± std."""
-    rows = [(label, unit, summary[key]) for key, label, unit in COLUMNS if key in summary]
+    rows = [(label, unit, summary[key]) for key, label, unit in metric_columns(TABLE) if key in summary]
     width = max(len(r[0]) for r in rows)
     lines = [title] if title else []
     lines.append(f"{'metric':<{width}}  {'unit':<4}  {'mean':>11} ± {'std':<10}")

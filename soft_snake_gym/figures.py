@@ -129,7 +129,7 @@ def rollout(
     import gymnasium as gym
 
     from soft_snake_gym.envs import register_envs
-    from soft_snake_gym.policies import make_policy
+    from soft_snake_gym.agents import make_policy
 
     register_envs()
     env = gym.make(env_id, max_episode_steps=int(round(seconds / 0.01)) + 1, **(env_kwargs or {}))

@@ -327,7 +327,8 @@ def headline_case(
         ``failure`` ("" if none).
     """
     from soft_snake_gym.evaluation import evaluate, make_eval_env
-    from soft_snake_gym.policies import make_policy, policy_gait
+    from soft_snake_gym.agents import make_policy
+    from soft_snake_gym.policies import policy_gait
 
     if transient_cycles < 0 or cycles <= 0:
         raise ValueError(f"transient_cycles = {transient_cycles!r} must be >= 0 and cycles = {cycles!r} > 0")

@@ -184,7 +184,7 @@ def cell_key(cell: dict[str, Any]) -> str:
 def run_cell(cell: dict[str, Any], grid: StudyGrid | None = None) -> dict[str, Any]:
     """Run one grid cell (one episode) and return the cell with its metrics."""
     from soft_snake_gym.evaluation import evaluate, make_eval_env
-    from soft_snake_gym.policies import make_policy
+    from soft_snake_gym.agents import make_policy
 
     grid = grid or StudyGrid()
     t0 = time.perf_counter()

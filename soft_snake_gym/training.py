@@ -43,7 +43,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from soft_snake_gym.config import ConfigError, _Loader, load_yaml
+from soft_snake_gym.agents import ZOO, TrainedPolicy, _find_model, latest_checkpoint, load_trained, zoo_path  # noqa: F401 - moved to agents (issue 10)
+from soft_snake_gym.config import CONFIG_DIR, ConfigError, _Loader, load_yaml
 from soft_snake_gym.params import plain_number
 
 __all__ = [
@@ -60,7 +61,7 @@ __all__ = [
 ALGOS = ("PPO", "SAC")
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 DEFAULT_BASELINES = {"SoftEel-v0": "pid", "SoftWorm-v0": "inching-pid"}
-CONFIGS = Path(__file__).resolve().parent / "configs"
+CONFIGS = CONFIG_DIR / "algorithm"
 
 
 @dataclass(frozen=True)
@@ -397,7 +398,7 @@ def _make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
     from soft_snake_gym.evaluation import evaluate, make_eval_env, summarize
-    from soft_snake_gym.policies import make_policy
+    from soft_snake_gym.agents import make_policy
 
     class Checkpoint(BaseCallback):
         """Model and VecNormalize statistics at every multiple of ``checkpoint_freq``

@@ -19,7 +19,7 @@ from gymnasium.spaces import Box
 import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.cli import main
 from soft_snake_gym.config import ConfigError
-from soft_snake_gym.convergence import (
+from soft_snake_gym.studies.convergence import (
     ABSOLUTE_TOLERANCE,
     ConvergenceResult,
     RandomActions,

@@ -22,6 +22,7 @@ from soft_snake_gym.envs import InchEnv, InchSettings, SwimEnv, SwimSettings
 from soft_snake_gym.gaits import pulse_wave, serpenoid, serpenoid_phase
 
 ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = ROOT / "soft_snake_gym" / "configs" / "env"
 IDS = ["SoftEel-v0", "SoftWorm-v0"]
 G = 9.81
 
@@ -443,15 +444,15 @@ def test_randomization_draws_physics_per_episode_and_reports_it():
 
 # --- configuration ---------------------------------------------------------------------------
 def test_yaml_configs_hold_the_defaults_and_keywords_override_them():
-    eel = gym.make("SoftEel-v0", config=ROOT / "configs/softeel.yaml").unwrapped
+    eel = gym.make("SoftEel-v0", config="softeel").unwrapped  # a config shipped in the package, by name
     assert eel.settings == SwimSettings()
-    worm = gym.make("SoftWorm-v0", config=ROOT / "configs/softworm.yaml", max_length_rate=0.4).unwrapped
+    worm = gym.make("SoftWorm-v0", config=CONFIGS / "softworm.yaml", max_length_rate=0.4).unwrapped  # or a path
     assert worm.settings == dataclasses.replace(InchSettings(), max_length_rate=0.4)
     assert worm.max_length_rate == 0.4
     # a simulator config file (with its medium key) is an env config too
     from soft_snake_gym.config import load_sim_config
 
-    sim_file = ROOT / "configs/eel.yaml"
+    sim_file = CONFIGS / "eel.yaml"
     assert gym.make("SoftEel-v0", config=sim_file).unwrapped.sim.config == load_sim_config(sim_file)
 
 
@@ -463,7 +464,7 @@ def test_config_errors_name_the_key_and_the_fix(tmp_path):
     with pytest.raises(ConfigError, match="did you mean 'mu_s'"):
         gym.make("SoftWorm-v0", ground={"mus": 1.0})
     with pytest.raises(ConfigError, match="medium = 'ground'.*'water'"):
-        gym.make("SoftEel-v0", config=ROOT / "configs/worm.yaml")
+        gym.make("SoftEel-v0", config="worm")
     with pytest.raises(ConfigError, match="dt = 0.015 must be a positive integer multiple"):
         gym.make("SoftEel-v0", dt=0.015)
     with pytest.raises(ConfigError, match="rest_length_limits"):

@@ -204,8 +204,7 @@ def test_policy_gait_reads_the_spec_and_the_policy_config():
     from soft_snake_gym.config import ConfigError
     from soft_snake_gym.policies import policy_gait
 
-    root = __import__("pathlib").Path(__file__).resolve().parents[1]
-    gait = policy_gait("pid:alpha=pi/3", config=root / "configs/pid.yaml")
+    gait = policy_gait("pid:alpha=pi/3", config="pid")  # the shipped policy config, by name
     assert gait == {
         "alpha": math.pi / 3,
         "omega": 2 * math.pi / 3,

@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 import soft_snake_gym  # noqa: F401 - registers the ids
+from soft_snake_gym.agents import make_policy
 from soft_snake_gym.config import ConfigError
 from soft_snake_gym.evaluation import evaluate, make_eval_env
 from soft_snake_gym.gaits import length_wave, pulse_wave
-from soft_snake_gym.policies import InchingPID, InchingWave, make_policy
+from soft_snake_gym.policies import InchingPID, InchingWave
 from soft_snake_gym.policies.inching import PULSE_DUTY
 
 L0, EPS, OMEGA, N_EDGES = 0.18, 0.3, 2 * math.pi, 9

@@ -10,7 +10,7 @@ import pytest
 from soft_snake_gym import Fluid, Ground, Integrator, Rod, SimConfig
 from soft_snake_gym.config import ConfigError, from_dict, load_sim_config, load_yaml
 
-CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+CONFIGS = Path(__file__).resolve().parents[1] / "soft_snake_gym" / "configs" / "env"
 
 
 @pytest.mark.parametrize(
@@ -139,13 +139,14 @@ def test_unknown_preset_lists_the_available_ones(tmp_path, name, message):
         load_sim_config(path)
 
 
-def test_presets_are_shipped_as_package_data():
+def test_presets_and_configs_are_shipped_as_package_data():
     import fnmatch
 
     tomllib = pytest.importorskip("tomllib")
-    root = CONFIGS.parent
+    root = Path(__file__).resolve().parents[1]
     globs = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
-    files = sorted((root / "soft_snake_gym" / "configs" / "presets").glob("*.yaml"))
+    files = sorted(p for p in (root / "soft_snake_gym" / "configs").rglob("*") if p.is_file())
+    assert {p.parent.name for p in files} == {"env", "policy", "algorithm", "presets"}
     assert files
     for f in files:
         rel = f.relative_to(root / "soft_snake_gym").as_posix()

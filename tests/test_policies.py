@@ -10,6 +10,7 @@ import pytest
 from stable_baselines3.common.evaluation import evaluate_policy
 
 import soft_snake_gym  # noqa: F401 - registers the ids
+from soft_snake_gym.agents import make_policy
 from soft_snake_gym.config import ConfigError
 from soft_snake_gym.evaluation import evaluate, make_eval_env
 from soft_snake_gym.figures import rest_start_options, rollout
@@ -21,7 +22,6 @@ from soft_snake_gym.policies import (
     InchingWave,
     OpenLoopSerpenoid,
     PolicyEnvMismatch,
-    make_policy,
     parse_policy_spec,
 )
 
@@ -160,7 +160,7 @@ def test_gains_load_from_yaml(tmp_path):
     from pathlib import Path
 
     env = gym.make("SoftEel-v0")
-    repo_cfg = Path(__file__).resolve().parents[1] / "configs" / "pid.yaml"
+    repo_cfg = Path(__file__).resolve().parents[1] / "soft_snake_gym" / "configs" / "policy" / "pid.yaml"
     p = CurvaturePID.from_yaml(env, repo_cfg)
     assert (p.params.Kp, p.params.Kd, p.params.Ki, p.params.saturation) == (10.0, 1.0, 5.0, 1.5)
     for name, cls, env_id in (

@@ -81,8 +81,8 @@ def test_headline_table_goes_into_the_report(short_headline, tmp_path):
 
 
 def test_windowed_fluid_power_is_the_mean_of_the_step_powers():
+    from soft_snake_gym.agents import make_policy
     from soft_snake_gym.evaluation import evaluate, make_eval_env
-    from soft_snake_gym.policies import make_policy
 
     env = make_eval_env("SoftEel-v0", env_kwargs={"max_episode_steps": 60})
     ep = evaluate(make_policy("open-loop", env), env, episodes=1, transient=0.0)[0]
@@ -95,8 +95,8 @@ def test_com_speed_is_the_displacement_over_the_window_whatever_its_direction():
     import gymnasium as gym
     import numpy as np
 
+    from soft_snake_gym.agents import make_policy
     from soft_snake_gym.evaluation import evaluate, make_eval_env
-    from soft_snake_gym.policies import make_policy
 
     kwargs = {"max_episode_steps": 200, "goal_direction": 0.5}
     ep = evaluate(

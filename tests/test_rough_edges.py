@@ -71,10 +71,10 @@ def test_a_yaml_key_given_twice_is_an_error(tmp_path):
 
 
 def test_compare_title_counts_one_episode_in_the_singular():
-    from soft_snake_gym.compare import _episodes_on_seeds
+    from soft_snake_gym.cli.compare import episodes_on_seeds
 
-    assert _episodes_on_seeds(1, 0) == "1 episode per policy, seed 0"
-    assert _episodes_on_seeds(3, 5) == "3 episodes per policy, seeds 5..7"
+    assert episodes_on_seeds(1, 0) == "1 episode per policy, seed 0"
+    assert episodes_on_seeds(3, 5) == "3 episodes per policy, seeds 5..7"
 
 
 # --- documentation and the Gymnasium contract ---------------------------------------------------

@@ -149,7 +149,7 @@ def test_shipped_agents_beat_their_baselines(env_id, baseline):
     selected on: the eel swims faster than the PID (at a higher cost of transport: pricing
     energy so that it also beats the PID's is still open), the worm goes further than the
     closed-loop peristaltic pulse."""
-    from soft_snake_gym.compare import compare
+    from soft_snake_gym.studies.compare import compare
 
     res = compare(env_id, ["zoo:ppo", baseline], episodes=1, seed=42)
     agent, base = res["zoo:ppo"], res[baseline]

@@ -8,9 +8,8 @@ from typing import Any
 
 import gymnasium
 
-from soft_snake_gym.config import ConfigError
+from soft_snake_gym.config import ConfigError, parse_assignments
 from soft_snake_gym.policies import PolicyEnvMismatch
-from soft_snake_gym.policies.base import parse_value
 
 __all__ = ["CLIError", "Parser", "USER_ERRORS", "add_env_arguments", "env_kwargs_from_args"]
 
@@ -35,30 +34,18 @@ class Parser(argparse.ArgumentParser):
 def add_env_arguments(p: argparse.ArgumentParser) -> None:
     """``--max-steps``, ``--env-config`` and ``--env-kwarg``: the env of an episode command."""
     p.add_argument("--max-steps", type=int, help="episode length in control steps (default: the id's)")
-    p.add_argument("--env-config", metavar="YAML", help="YAML file of env keywords")
+    p.add_argument("--env-config", metavar="YAML",
+                   help="YAML file of env keywords, or a shipped one by name (softeel, softworm, eel, worm)")
     p.add_argument("--env-kwarg", action="append", metavar="KEY=VALUE",
                    help="env keyword, repeatable; dotted keys reach sections (rod.E_bend=1.87e4)")
-
-
-def _parse_env_kwargs(items: list[str]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for item in items or []:
-        key, eq, value = item.partition("=")
-        if not eq:
-            raise CLIError(f"--env-kwarg {item!r} is not key=value; write e.g. --env-kwarg dt=0.02")
-        # dotted keys build nested sections: rod.E_bend=1.87e4 -> {"rod": {"E_bend": ...}}
-        node = out
-        parts = key.strip().split(".")
-        for p in parts[:-1]:
-            node = node.setdefault(p, {})
-        node[parts[-1]] = parse_value(value)
-    return out
 
 
 def env_kwargs_from_args(args: argparse.Namespace) -> dict[str, Any]:
     """The env keywords of an episode command: ``--env-kwarg``, ``--env-config`` and
     ``--max-steps`` (checked) as ``make_eval_env``'s ``env_kwargs``."""
-    env_kwargs = _parse_env_kwargs(args.env_kwarg)
+    # dotted keys build nested sections: rod.E_bend=1.87e4 -> {"rod": {"E_bend": ...}}
+    env_kwargs = parse_assignments(
+        args.env_kwarg, "--env-kwarg {item} is not key=value; write e.g. --env-kwarg dt=0.02")
     if args.env_config:
         env_kwargs["config"] = args.env_config
     if args.max_steps is not None:

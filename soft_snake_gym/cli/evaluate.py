@@ -8,6 +8,7 @@ import math
 import time
 from pathlib import Path
 
+from soft_snake_gym.agents import make_policy
 from soft_snake_gym.cli.common import CLIError, add_env_arguments, env_kwargs_from_args
 from soft_snake_gym.evaluation import (
     check_transient,
@@ -17,7 +18,7 @@ from soft_snake_gym.evaluation import (
     make_eval_env,
     summarize,
 )
-from soft_snake_gym.policies import make_policy, policy_gait
+from soft_snake_gym.policies import policy_gait
 
 NAME = "evaluate"
 HELP = "evaluate a baseline or a trained model for K episodes"
@@ -30,7 +31,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="baseline name with options (pid, 'pid:alpha=0.5,omega=2.1', decentralized, "
                         "'decentralized:closure=pacemaker', open-loop, inching, inching-pid) "
                         "or the path to a saved SB3 model (.zip)")
-    p.add_argument("--policy-config", metavar="YAML", help="YAML file of the policy's gait/gains")
+    p.add_argument("--policy-config", metavar="YAML",
+                   help="YAML file of the policy's gait/gains, or a shipped one by name (pid, pid_soft, "
+                        "open_loop, decentralized, inching)")
     p.add_argument("--episodes", type=int, default=3, help="number of episodes (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
     p.add_argument("--transient", type=float,

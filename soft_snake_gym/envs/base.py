@@ -23,7 +23,7 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 
-from soft_snake_gym.config import ConfigError, from_dict, load_yaml, with_preset
+from soft_snake_gym.config import ConfigError, config_path, from_dict, load_yaml, with_preset
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.task import G
 from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig, plain_number
@@ -205,7 +205,7 @@ def resolve_settings(settings_cls: type, medium: str, config: str | Path | None,
     data: dict[str, Any] = {}
     where = label or settings_cls.__name__
     if config is not None:
-        data = dict(load_yaml(config))
+        data = dict(load_yaml(config_path(config, "env")))
         where = Path(config).name
         file_medium = data.pop("medium", medium)
         if file_medium != medium:

@@ -14,14 +14,13 @@ divides by that scale and clips.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
-from soft_snake_gym.config import from_dict, load_yaml
+from soft_snake_gym.config import config_path, from_dict, load_yaml
 
 __all__ = ["BaselinePolicy", "EnvLayout", "PolicyEnvMismatch", "env_layout"]
 
@@ -106,27 +105,6 @@ def env_layout(env: Any) -> EnvLayout:
     )
 
 
-def parse_value(text: str) -> Any:
-    """A number (``0.5``, ``1e4``, ``pi``, ``pi/6``, ``2*pi/3``) or, failing that, the string."""
-    s = text.strip()
-    try:
-        return int(s) if s.lstrip("+-").isdigit() else float(s)
-    except ValueError:
-        pass
-    value, ok = 1.0, True
-    for i, factor in enumerate(s.replace("/", " / ").replace("*", " * ").split()):
-        if factor in ("*", "/"):
-            op = factor
-            continue
-        try:
-            num = math.pi if factor.lower() == "pi" else float(factor)
-        except ValueError:
-            ok = False
-            break
-        value = num if i == 0 else (value * num if op == "*" else value / num)
-    return value if ok and s else s
-
-
 class BaselinePolicy:
     """Base class: subclasses set ``Params`` (a frozen dataclass), ``needs`` (observation
     blocks), ``kind`` and implement :meth:`_control`.
@@ -164,8 +142,9 @@ class BaselinePolicy:
 
     @classmethod
     def from_yaml(cls, env: Any, path: str | Path, **overrides: Any) -> BaselinePolicy:
-        """Build from a YAML mapping of ``Params`` fields (``overrides`` win)."""
-        data = load_yaml(path)
+        """Build from a YAML mapping of ``Params`` fields (``overrides`` win): a shipped policy
+        config by name (``"pid"``) or a file."""
+        data = load_yaml(config_path(path, "policy"))
         return cls(env, **{**data, **overrides})
 
     # subclasses ------------------------------------------------------------------------

@@ -53,11 +53,17 @@ from typing import Any
 
 import numpy as np
 
+from soft_snake_gym.agents import make_policy
+from soft_snake_gym.config import ConfigError
+from soft_snake_gym.evaluation import evaluate, make_eval_env, metric_columns
+from soft_snake_gym.policies import parse_policy_spec
+
 __all__ = [
     "ABSOLUTE_TOLERANCE",
     "METRICS",
     "RELATIVE_TOLERANCE",
     "ConvergenceResult",
+    "DEFAULT_FACTORS",
     "RandomActions",
     "convergence",
     "format_convergence",
@@ -119,10 +125,7 @@ class RandomActions:
 
 def make_convergence_policy(spec: str, env: Any, seed: int) -> Any:
     """``"random"`` or ``"random:scale=0.5"`` as :class:`RandomActions` seeded with ``seed``;
-    anything else through :func:`soft_snake_gym.policies.make_policy`."""
-    from soft_snake_gym.config import ConfigError
-    from soft_snake_gym.policies import make_policy, parse_policy_spec
-
+    anything else through :func:`soft_snake_gym.agents.make_policy`."""
     if spec.partition(":")[0].strip() != "random":
         return make_policy(spec, env)
     _, params = parse_policy_spec(spec)
@@ -213,8 +216,6 @@ class ConvergenceResult:
 
 
 def _check_factors(factors: Any) -> list[int]:
-    from soft_snake_gym.config import ConfigError
-
     out = list(factors)
     if len(out) < 2 or any(isinstance(f, bool) or not isinstance(f, int) or f < 1 for f in out):
         raise ConfigError(f"factors = {out!r} must be at least two integers >= 1, e.g. 1 4 16")
@@ -249,8 +250,6 @@ def convergence(
     Raises:
         ConfigError: bad factors, policy spec or env keyword (before any episode runs).
     """
-    from soft_snake_gym.evaluation import evaluate, make_eval_env
-
     factors = _check_factors(factors)
     kwargs = dict(env_kwargs or {})
     env = make_eval_env(env_id, seed=seed, env_kwargs=kwargs)
@@ -293,10 +292,7 @@ def convergence(
 def format_convergence(result: ConvergenceResult) -> str:
     """The refinement table: per metric, the value at each factor, the ratio to the finest run,
     the largest relative difference, the tolerance and PASS/FAIL."""
-    from soft_snake_gym.evaluation import COLUMNS
-
-    labels = {key: (label, unit) for key, label, unit in COLUMNS}
-    labels["mean_fluid_power"] = ("fluid power", "W")
+    labels = {key: (label, unit) for key, label, unit in metric_columns(list(result.values))}
     r = result
     head = [f"{s} substep{'s' if s > 1 else ''}" for s in r.substeps]
     width = max(len(labels[m][0]) for m in r.values)
@@ -330,76 +326,3 @@ def format_convergence(result: ConvergenceResult) -> str:
             lines.append(f"{s} substeps: the episode failed ({why})")
     lines.append("converged: all metrics within tolerance" if r.ok else "NOT converged")
     return "\n".join(lines)
-
-
-# --- soft-snake convergence ---------------------------------------------------------------------
-def _arguments(p) -> None:
-    p.add_argument("env_id", help="environment id, e.g. SoftEel-v0 or SoftWorm-v0")
-    p.add_argument(
-        "--policy",
-        required=True,
-        help="what 'evaluate --policy' takes (pid, 'inching:wave=pulse,duty=0.6', zoo:ppo, a run "
-        "folder or model zip), or 'random' / 'random:scale=0.5' for a fixed seeded "
-        "random-action sequence",
-    )
-    p.add_argument(
-        "--factors",
-        type=int,
-        nargs="+",
-        default=list(DEFAULT_FACTORS),
-        metavar="F",
-        help="divide the integration step by each (integrator.substeps = k F, the control "
-        "step unchanged); the largest is the reference (default 1 4 16)",
-    )
-    p.add_argument(
-        "--seed",
-        type=int,
-        default=0,
-        help="seed of the episode and of 'random'; the same at every factor (default 0)",
-    )
-    p.add_argument(
-        "--transient",
-        type=float,
-        default=2.0,
-        help="start-up time left out of speed and error [s] (default 2)",
-    )
-    p.add_argument("--max-steps", type=int, help="episode length in control steps (default: the id's)")
-    p.add_argument("--env-config", metavar="YAML", help="YAML file of env keywords")
-    p.add_argument(
-        "--env-kwarg",
-        action="append",
-        metavar="KEY=VALUE",
-        help="env keyword, repeatable; dotted keys reach sections (rod.damping_bend=1)",
-    )
-    p.add_argument("--json", metavar="PATH", help="also write the table as JSON")
-
-
-def _run(args) -> int:
-    import json
-    from pathlib import Path
-
-    from soft_snake_gym.cli import env_kwargs_from_args
-
-    env_kwargs = env_kwargs_from_args(args)
-    result = convergence(args.env_id, args.policy, env_kwargs, args.factors, args.seed, args.transient)
-    print(format_convergence(result))
-    if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(result.to_dict(), indent=2))
-        print(f"wrote {path}")
-    return 0 if result.ok else 1
-
-
-def _register() -> None:
-    from soft_snake_gym.cli import subcommand
-
-    subcommand(
-        "convergence",
-        "check that a policy's episode metrics do not change when the "
-        "integration step shrinks (exit code 1 if they do)",
-        _arguments,
-    )(_run)
-
-
-_register()
