@@ -210,14 +210,16 @@ def _one_line_error(main_args, capsys, code=2) -> str:
 @pytest.fixture
 def no_work(monkeypatch):
     """Make any episode or env construction fail loudly: the checks must come first."""
-    import soft_snake_gym.compare as compare_mod
+    import soft_snake_gym.cli.compare as compare_cli
+    import soft_snake_gym.cli.evaluate as evaluate_cli
     import soft_snake_gym.evaluation as evaluation
 
     def boom(*args, **kwargs):
         raise AssertionError("work started before the arguments were checked")
 
     monkeypatch.setattr(evaluation, "evaluate", boom)
-    monkeypatch.setattr(compare_mod, "compare", boom)
+    monkeypatch.setattr(evaluate_cli, "evaluate", boom)  # the commands call the names they import
+    monkeypatch.setattr(compare_cli, "compare", boom)
     import soft_snake_gym.sweep as sweep_mod
 
     monkeypatch.setattr(sweep_mod, "run_cell", boom)
