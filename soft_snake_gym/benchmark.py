@@ -33,9 +33,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
+import numba
 import numpy as np
 
+import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.config import load_yaml, shipped_configs
+from soft_snake_gym.envs.vector import ROBOTS_PER_THREAD
+from soft_snake_gym.gaits import serpenoid, serpenoid_phase
 
 __all__ = ["run_benchmark", "format_report", "plot_benchmark", "DEFAULT_ROBOTS", "DEFAULT_NODES"]
 
@@ -54,8 +59,6 @@ class _SingleCase:
     """A ``gym.make`` env stepped by pre-drawn random actions, reset at episode ends."""
 
     def __init__(self, env_id: str, **kwargs: Any) -> None:
-        import gymnasium as gym
-
         self.env = gym.make(env_id, **kwargs)
         self.env.reset(seed=0)
         rng = np.random.default_rng(0)
@@ -105,8 +108,6 @@ class _VectorCase:
 def _gait_actions(robots: int, n: int = 8, steps: int = 300) -> np.ndarray:
     """The thesis serpenoid (alpha = pi/6, omega = 2 pi/3) as normalized SoftEel-v0 actions
     of ``robots`` eels of ``n + 2`` nodes, (steps, robots, n) float32."""
-    from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-
     alpha, omega = (math.pi / 6) * 8 / n, 2 * math.pi / 3  # the same body shape at any n
     t = (np.arange(steps) + 0.5) * 0.01
     rates = np.array([serpenoid(serpenoid_phase(ti, n, omega, 2 * math.pi / n), omega, alpha)[1] for ti in t])
@@ -152,6 +153,8 @@ def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
+    # here, not at the top: sb3 imports Stable-Baselines3 and torch (seconds), which the
+    # command line would otherwise pay on every start
     from soft_snake_gym.sb3 import SoftVecEnv
 
     cfg_envs, ppo_kwargs, env_kwargs = _ppo_settings(env_id)
@@ -180,8 +183,6 @@ def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict
 # --- cost against N -------------------------------------------------------------------------
 def time_nodes(N: int, robots: int, seconds: float) -> dict[str, Any]:
     """Microseconds per robot step of the batched eel with N nodes (same body, one thread)."""
-    import gymnasium as gym
-
     rod = {"N": N, "edge_length": 1.62 / (N - 1), "edge_mass": 7.2 / (N - 1)}
     venv = gym.make_vec("SoftEel-v0", num_envs=robots, num_threads=1, rod=rod)
     venv.reset(seed=0)
@@ -215,12 +216,6 @@ def run_benchmark(
     progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Run every case; returns the results (see :func:`format_report`)."""
-    import gymnasium as gym
-    import numba
-
-    import soft_snake_gym  # noqa: F401 - registers the ids
-    from soft_snake_gym.envs.vector import ROBOTS_PER_THREAD
-
     say = progress or (lambda msg: None)
     all_threads = numba.config.NUMBA_NUM_THREADS
     cases: dict[str, Any] = {}
@@ -287,8 +282,6 @@ def run_benchmark(
 
 
 def _threading_layer() -> str:
-    import numba
-
     try:
         return numba.threading_layer()
     except ValueError:
