@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from soft_snake_gym.envs import register_envs
+
 __all__ = ["EpisodeRecorder", "evaluate", "make_eval_env", "summarize", "format_table", "COLUMNS", "METRICS",
            "Metric", "TABLE", "metric_columns", "check_video_path", "check_transient", "gait_rate_warning"]
 
@@ -120,8 +122,6 @@ def make_eval_env(
     import gymnasium as gym
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
-
-    from soft_snake_gym.envs import register_envs
 
     register_envs()  # what ``import soft_snake_gym`` does; harmless to repeat
 
