@@ -59,9 +59,7 @@ def subcommand(name: str, help: str, add_arguments: Callable[[argparse.ArgumentP
 
 
 def _load_subcommands() -> None:
-    for module in ("soft_snake_gym.sweep", "soft_snake_gym.figures", "soft_snake_gym.reproduce",
-                   "soft_snake_gym.training", "soft_snake_gym.compare", "soft_snake_gym.benchmark",
-                   "soft_snake_gym.convergence"):
+    for module in ("soft_snake_gym.compare", "soft_snake_gym.benchmark", "soft_snake_gym.convergence"):
         importlib.import_module(module)
 # END TRANSITIONAL
 

@@ -1,4 +1,4 @@
-"""``soft-snake reproduce``: every sweep, both trajectory figures, the sources' headline case,
+"""The thesis reproduction: every sweep, both trajectory figures, the sources' headline case,
 and ``docs/thesis_reproduction.md`` with the finding-by-finding table, computed from the CSVs.
 
 Each finding the thesis states in words is turned into a count over the grid cells (how many
@@ -8,7 +8,6 @@ least 80 % of the comparisons agree, **partly** from 50 %, **no** below.
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 from pathlib import Path
@@ -16,7 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from soft_snake_gym.cli import subcommand
+from soft_snake_gym.evaluation import evaluate, make_eval_env
+from soft_snake_gym.policies import make_policy, policy_gait
+from soft_snake_gym.studies.figures import make_all_figures
+from soft_snake_gym.studies.sweep import STUDIES, StudyGrid, cell_key, control_step, read_results, run_sweep
 
 __all__ = ["findings", "headline_case", "headline_table", "headline_window", "write_report", "reproduce"]
 
@@ -326,9 +328,6 @@ def headline_case(
         ``fluid_power`` [W] and ``curvature_error`` [-] (means over the steady-state window),
         ``failure`` ("" if none).
     """
-    from soft_snake_gym.evaluation import evaluate, make_eval_env
-    from soft_snake_gym.policies import make_policy, policy_gait
-
     if transient_cycles < 0 or cycles <= 0:
         raise ValueError(f"transient_cycles = {transient_cycles!r} must be >= 0 and cycles = {cycles!r} > 0")
     models = tuple(HEADLINE_MODELS) if models is None else models
@@ -342,12 +341,11 @@ def headline_case(
             for controller, (name, options) in HEADLINE_CONTROLLERS.items():
                 gait = {**options, "alpha": alpha, "omega": HEADLINE_OMEGA}
                 spec = f"{name}:" + ",".join(f"{k}={v!r}" for k, v in gait.items())
-                env_kwargs: dict[str, Any] = {
-                    "start_on_gait": policy_gait(spec),
-                    "max_episode_steps": int(round((transient_cycles + cycles) * period / 0.01)),
-                }
+                env_kwargs: dict[str, Any] = {"start_on_gait": policy_gait(spec)}
                 if HEADLINE_MODELS[model] is not None:
                     env_kwargs["preset"] = HEADLINE_MODELS[model]
+                dt = control_step("SoftEel-v0", env_kwargs)
+                env_kwargs["max_episode_steps"] = int(round((transient_cycles + cycles) * period / dt))
                 env = make_eval_env("SoftEel-v0", seed=0, env_kwargs=env_kwargs)
                 ep = evaluate(make_policy(spec, env), env, episodes=1, transient=transient_cycles * period)[0]
                 env.close()
@@ -525,9 +523,6 @@ decentralized default gains are (10, 2, 1).
 
 def reproduce(out: str | Path = "docs", workers: int | None = None, progress: bool = True, grid=None) -> Path:
     """Run everything and write ``<out>/thesis_reproduction.md``."""
-    from soft_snake_gym.figures import make_all_figures
-    from soft_snake_gym.sweep import STUDIES, StudyGrid, cell_key, read_results, run_sweep
-
     out = Path(out)
     img = out / "img"
     grid = grid or StudyGrid()
@@ -556,33 +551,3 @@ def reproduce(out: str | Path = "docs", workers: int | None = None, progress: bo
     facts = findings(rows["swim-gait"], rows["swim-stiffness"], rows["inch-friction"])
     extras["land"] = _land_numbers(rows["inch-friction"])
     return write_report(out / "thesis_reproduction.md", img, facts, extras)
-
-
-def _reproduce_arguments(p: argparse.ArgumentParser) -> None:
-    from soft_snake_gym.sweep import _grid_arguments
-
-    p.add_argument("--out", default="docs", help="folder of thesis_reproduction.md; figures go to <out>/img")
-    p.add_argument("--workers", type=int, help="processes (default: all local cores)")
-    p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
-    p.add_argument(
-        "--headline-only",
-        action="store_true",
-        help="only compute and print the sources' headline case (PID and open loop at the "
-        "thesis gait, default physics and thesis preset); writes no files",
-    )
-    _grid_arguments(p)
-
-
-@subcommand(
-    "reproduce", "run all sweeps and figures and write docs/thesis_reproduction.md", _reproduce_arguments
-)
-def _reproduce(args: argparse.Namespace) -> int:
-    from soft_snake_gym.sweep import grid_from_args
-
-    if args.headline_only:
-        print(f"Averaged over {headline_window()}:")
-        print(headline_table(headline_case()))
-        return 0
-    path = reproduce(args.out, workers=args.workers, progress=not args.no_progress, grid=grid_from_args(args))
-    print(f"wrote {path}")
-    return 0
