@@ -18,7 +18,22 @@ from soft_snake_gym.policies import make_policy
 from soft_snake_gym.policies.open_loop import SerpenoidParams
 from soft_snake_gym.studies.sweep import control_step
 
-__all__ = ["swim_snapshots", "controller_comparison", "rollout", "rest_start_options", "make_all_figures"]
+__all__ = [
+    "COMPARISON_CENTRALIZED",
+    "SETTLED_AFTER",
+    "controller_comparison",
+    "make_all_figures",
+    "mean_error_after",
+    "rest_start_options",
+    "rollout",
+    "swim_snapshots",
+]
+
+SETTLED_AFTER = 2.0
+"""Time [s] after which the comparison's mean curvature error is taken (the start-up is over)."""
+
+COMPARISON_CENTRALIZED = "pid:Kd=2,Ki=1"
+"""The centralized controller of :func:`controller_comparison`: the decentralized one's gains."""
 
 
 def rollout(
@@ -94,14 +109,19 @@ def rest_start_options(n_nodes: int = 10) -> dict[str, np.ndarray]:
     return {"kbar": kd}
 
 
+def mean_error_after(trajectory: dict[str, np.ndarray], start: float = SETTLED_AFTER) -> float:
+    """Mean curvature error [-] of a :func:`rollout` over the steps from ``start`` [s] on."""
+    return float(trajectory["error"][trajectory["t"][:-1] >= start].mean())
+
+
 def controller_comparison(
     out: str | Path,
     seconds: float = 6.0,
-    centralized: str = "pid:Kd=2,Ki=1",
+    centralized: str = COMPARISON_CENTRALIZED,
     decentralized: str = "decentralized",
 ) -> tuple[Path, dict[str, float]]:
     """Centralized vs decentralized PID from rest: curvature error, curvature and input per
-    node over time. Returns the PNG and the mean error after 2 s of each."""
+    node over time. Returns the PNG and the mean error after :data:`SETTLED_AFTER` of each."""
     specs = {"centralized": centralized, "decentralized": decentralized}
     runs = {
         name: rollout(
@@ -113,7 +133,7 @@ def controller_comparison(
         )
         for name, spec in specs.items()
     }
-    numbers = {name: float(tr["error"][tr["t"][:-1] >= 2.0].mean()) for name, tr in runs.items()}
+    numbers = {name: mean_error_after(tr) for name, tr in runs.items()}
     return plots.controller_comparison(runs, specs, numbers, out), numbers
 
 

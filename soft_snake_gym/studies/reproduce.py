@@ -3,26 +3,105 @@ and ``docs/thesis_reproduction.md`` with the finding-by-finding table, computed 
 
 Each finding the thesis states in words is turned into a count over the grid cells (how many
 comparisons go the stated way), so the verdict is a number, not an impression: **yes** when at
-least 80 % of the comparisons agree, **partly** from 50 %, **no** below.
+least :data:`YES_FRACTION` of the comparisons agree, **partly** from :data:`PARTLY_FRACTION`,
+**no** below.
+
+The report is the template ``thesis_reproduction.md`` shipped beside this module
+(:class:`string.Template`); every number in it is computed here, from the CSVs, the runs of
+this module or the package's own parameters.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import string
 import time
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from soft_snake_gym.evaluation import evaluate, make_eval_env
-from soft_snake_gym.policies import make_policy, policy_gait
-from soft_snake_gym.studies.figures import make_all_figures
-from soft_snake_gym.studies.sweep import STUDIES, StudyGrid, cell_key, control_step, read_results, run_sweep
+from soft_snake_gym.evaluation import evaluate, make_eval_env, summarize
+from soft_snake_gym.gaits import serpenoid, serpenoid_phase
+from soft_snake_gym.params import Rod
+from soft_snake_gym.policies import make_policy, parse_policy_spec, policy_gait
+from soft_snake_gym.policies.decentralized import DecentralizedParams
+from soft_snake_gym.policies.inching import PULSE_DUTY, InchingPIDParams
+from soft_snake_gym.policies.open_loop import OpenLoopParams, SerpenoidParams
+from soft_snake_gym.policies.pid import PIDParams
+from soft_snake_gym.studies.figures import (
+    COMPARISON_CENTRALIZED,
+    SETTLED_AFTER,
+    make_all_figures,
+    mean_error_after,
+    rest_start_options,
+    rollout,
+)
+from soft_snake_gym.studies.sweep import (
+    ALPHA_MAX_FRACTION,
+    SOFT_E_BEND,
+    SOFT_GAINS,
+    STUDIES,
+    StudyGrid,
+    cell_key,
+    control_step,
+    read_results,
+    run_cell,
+    run_sweep,
+)
 
-__all__ = ["findings", "headline_case", "headline_table", "headline_window", "write_report", "reproduce"]
+__all__ = [
+    "findings",
+    "headline_case",
+    "headline_table",
+    "headline_window",
+    "model_departures",
+    "write_report",
+    "reproduce",
+]
+
+YES_FRACTION = 0.8
+"""A finding holds (**yes**) when at least this fraction of its comparisons agree."""
+
+PARTLY_FRACTION = 0.5
+"""A finding holds **partly** from this fraction."""
+
+LEVEL = 5e-3
+"""Two neighbouring cells differ when they differ by more than this fraction of the larger."""
+
+TEMPLATE = Path(__file__).with_name("thesis_reproduction.md")
+"""The report's template (:class:`string.Template`)."""
 
 
+# --- formatting --------------------------------------------------------------------------------
+def _sci(x: float) -> str:
+    """``1.87e4``, ``1.875e6``: a modulus as the sources write it."""
+    mantissa, exponent = f"{x:.6e}".split("e")
+    return f"{mantissa.rstrip('0').rstrip('.')}e{int(exponent)}"
+
+
+def _gains(p: Any) -> str:
+    """``(Kp, Kd, Ki)`` of a mapping or parameter object, as ``(10, 2, 1)``."""
+    get = p.get if isinstance(p, dict) else lambda k: getattr(p, k)
+    return f"({get('Kp'):g}, {get('Kd'):g}, {get('Ki'):g})"
+
+
+def _pi_text(x: float, sep: str = "/") -> str:
+    """A rational multiple of pi in words: ``2 pi/3``, ``2 pi``, ``pi / 9`` with ``sep=" / "``."""
+    f = Fraction(x / math.pi).limit_denominator(64)
+    num = "pi" if f.numerator == 1 else f"{f.numerator} pi"
+    return num if f.denominator == 1 else f"{num}{sep}{f.denominator}"
+
+
+def _count(n: int) -> str:
+    """A small count in words (``three``), a large one in digits."""
+    words = ("zero", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine")
+    return words[n] if 0 <= n < len(words) else str(n)
+
+
+# --- findings ------------------------------------------------------------------------------------
 def _ok(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [r for r in rows if not r.get("failure") and np.isfinite(r.get("average_speed", math.nan))]
 
@@ -36,12 +115,13 @@ def _verdict(agree: int, total: int) -> str:
     if total == 0:
         return "n/a"
     f = agree / total
-    return "yes" if f >= 0.8 else "partly" if f >= 0.5 else "no"
+    return "yes" if f >= YES_FRACTION else "partly" if f >= PARTLY_FRACTION else "no"
 
 
 def _pairs_increasing(table: dict, along: int, with_ties: bool = False):
     """Count neighbouring pairs along axis ``along`` (0: first key, 1: second) where z rises
-    (by more than 0.5 % of the larger value); with ``with_ties`` also those that stay level."""
+    (by more than :data:`LEVEL` of the larger value); with ``with_ties`` also those that stay
+    level."""
     keys = sorted(table)
     others = sorted({k[1 - along] for k in keys})
     agree = total = ties = 0
@@ -49,20 +129,17 @@ def _pairs_increasing(table: dict, along: int, with_ties: bool = False):
         line = sorted((k[along], table[k]) for k in keys if k[1 - along] == o)
         for (_, a), (_, b) in zip(line, line[1:], strict=False):
             total += 1
-            tol = 5e-3 * max(abs(a), abs(b))
+            tol = LEVEL * max(abs(a), abs(b))
             agree += b > a + tol
             ties += abs(b - a) <= tol
     return (agree, ties, total) if with_ties else (agree, total)
 
 
-def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict[str, str]]:
-    """The thesis's findings with our verdicts and numbers."""
-    out = []
-    g = _ok(gait)
-    ol = _table(g, "alpha", "omega", "average_speed", controller="open-loop")
-    pid = _table(g, "alpha", "omega", "average_speed", controller="pid")
+def _finding(finding: str, agree: int, total: int, numbers: str) -> dict[str, str]:
+    return {"finding": finding, "verdict": _verdict(agree, total), "numbers": numbers}
 
-    # 1. speed rises with frequency
+
+def _speed_rises_with_frequency(ol: dict, pid: dict) -> list[dict[str, str]]:
     a1, t1 = _pairs_increasing(ol, 1)
     a1p, t1p = _pairs_increasing(pid, 1)
     alphas = sorted({k[0] for k in ol})
@@ -73,15 +150,11 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
         if line
         else ""
     )
-    out.append(
-        {
-            "finding": "Speed rises with frequency (swimming, E_bend = 1.87e4 Pa)",
-            "verdict": _verdict(a1 + a1p, t1 + t1p),
-            "numbers": f"speed rises in {a1}/{t1} neighbouring frequency steps open loop, {a1p}/{t1p} with PID{ex}",
-        }
-    )
+    return [_finding(f"Speed rises with frequency (swimming, E_bend = {_sci(SOFT_E_BEND)} Pa)", a1 + a1p, t1 + t1p,
+                     f"speed rises in {a1}/{t1} neighbouring frequency steps open loop, {a1p}/{t1p} with PID{ex}")]
 
-    # 2. at fixed frequency speed peaks at an intermediate amplitude
+
+def _speed_peaks_inside(ol: dict) -> list[dict[str, str]]:
     inner = total = 0
     peaks = []
     for w in sorted({k[1] for k in ol}):
@@ -92,18 +165,12 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
         i = int(np.argmax([v for _, v in line]))
         inner += 0 < i < len(line) - 1
         peaks.append(f"{w:.2f}: {line[i][0]:.2f}")
-    out.append(
-        {
-            "finding": "At fixed frequency, speed peaks at an intermediate amplitude (open loop)",
-            "verdict": _verdict(inner, total),
-            "numbers": f"interior peak at {inner}/{total} frequencies; peak amplitude by omega [rad/s]: alpha [rad] = "
-            + ", ".join(peaks)
-            + " (cells that self-intersect are excluded)",
-        }
-    )
+    return [_finding("At fixed frequency, speed peaks at an intermediate amplitude (open loop)", inner, total,
+                     f"interior peak at {inner}/{total} frequencies; peak amplitude by omega [rad/s]: alpha [rad] = "
+                     + ", ".join(peaks) + " (cells that self-intersect are excluded)")]
 
-    # 3. fluid losses rise with amplitude and frequency
-    pw = _table(g, "alpha", "omega", "mean_fluid_power", controller="open-loop")
+
+def _power_rises(pw: dict) -> list[dict[str, str]]:
     aa, ta = _pairs_increasing(pw, 0)
     aw, tw = _pairs_increasing(pw, 1)
     lo = min(pw.items(), key=lambda kv: kv[1]) if pw else None
@@ -113,15 +180,11 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
         if pw
         else ""
     )
-    out.append(
-        {
-            "finding": "Fluid power rises with amplitude and with frequency (open loop)",
-            "verdict": _verdict(aa + aw, ta + tw),
-            "numbers": f"rises in {aa}/{ta} amplitude steps and {aw}/{tw} frequency steps{rng}",
-        }
-    )
+    return [_finding("Fluid power rises with amplitude and with frequency (open loop)", aa + aw, ta + tw,
+                     f"rises in {aa}/{ta} amplitude steps and {aw}/{tw} frequency steps{rng}")]
 
-    # 4. stiffer bodies swim faster open loop
+
+def _stiffer_is_faster(stiff: list[dict]) -> list[dict[str, str]]:
     s = _ok(stiff)
     es = sorted({r["E_bend"] for r in s})
     agree = total = 0
@@ -142,19 +205,14 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
     for e in es:
         common = [r["average_speed"] for r in s if r["E_bend"] == e]
         means.append(f"{e:.3g} Pa: median {np.median(common):.4f} m/s" if common else f"{e:.3g} Pa: -")
-    out.append(
-        {
-            "finding": "Stiffer bodies swim faster open loop",
-            "verdict": _verdict(agree, total),
-            "numbers": f"speed rises with E_bend in {agree}/{total} stiffness steps at equal gait; "
-            + "; ".join(means),
-        }
-    )
+    return [_finding("Stiffer bodies swim faster open loop", agree, total,
+                     f"speed rises with E_bend in {agree}/{total} stiffness steps at equal gait; " + "; ".join(means))]
 
-    # 5. feedback beats open loop on speed and error at low stiffness, at a higher energy cost
+
+def _feedback_in_water(g: list[dict], ol: dict, pid: dict, p_ol: dict) -> list[dict[str, str]]:
+    """Feedback beats open loop on speed and error at low stiffness, at a higher energy cost."""
     err_ol = _table(g, "alpha", "omega", "curvature_error", controller="open-loop")
     err_pid = _table(g, "alpha", "omega", "curvature_error", controller="pid")
-    p_ol = pw
     p_pid = _table(g, "alpha", "omega", "mean_fluid_power", controller="pid")
     e_ol = _table(g, "alpha", "omega", "energy_actuator", controller="open-loop")
     e_pid = _table(g, "alpha", "omega", "energy_actuator", controller="pid")
@@ -166,30 +224,18 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
     ratio = np.median([pid[k] / ol[k] for k in both if ol[k] > 0]) if both else math.nan
     eratio = np.median([err_pid[k] / err_ol[k] for k in both]) if both else math.nan
     n = len(both)
-    out.append(
-        {
-            "finding": "Feedback (PID) swims faster than open loop at low stiffness",
-            "verdict": _verdict(faster, n),
-            "numbers": f"PID faster in {faster}/{n} cells, median speed ratio PID/open loop {ratio:.2f}",
-        }
-    )
-    out.append(
-        {
-            "finding": "Feedback has a lower curvature error than open loop at low stiffness",
-            "verdict": _verdict(lower_err, n),
-            "numbers": f"PID error lower in {lower_err}/{n} cells, median error ratio PID/open loop {eratio:.2f}",
-        }
-    )
-    out.append(
-        {
-            "finding": "Feedback costs more energy",
-            "verdict": _verdict(costlier, n),
-            "numbers": f"PID fluid power higher in {costlier}/{n} cells, actuator energy higher in {act_costlier}/{n}",
-        }
-    )
+    return [
+        _finding("Feedback (PID) swims faster than open loop at low stiffness", faster, n,
+                 f"PID faster in {faster}/{n} cells, median speed ratio PID/open loop {ratio:.2f}"),
+        _finding("Feedback has a lower curvature error than open loop at low stiffness", lower_err, n,
+                 f"PID error lower in {lower_err}/{n} cells, median error ratio PID/open loop {eratio:.2f}"),
+        _finding("Feedback costs more energy", costlier, n,
+                 f"PID fluid power higher in {costlier}/{n} cells, actuator energy higher in {act_costlier}/{n}"),
+    ]
 
-    # 6. on land, more static and less kinetic friction go further
-    c = [r for r in inch if not r.get("failure")]
+
+def _friction(c: list[dict]) -> list[dict[str, str]]:
+    """On land, more static and less kinetic friction go further."""
     agree_s = total_s = agree_d = total_d = ties_s = ties_d = 0
     for ctrl in ("inching", "inching-pid"):
         d = _table(c, "mu_s", "mu_d", "distance", controller=ctrl)
@@ -208,24 +254,18 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
         if d_ol
         else ""
     )
-    out.append(
-        {
-            "finding": "On land, more static friction goes further",
-            "verdict": _verdict(agree_s, total_s),
-            "numbers": f"distance rises with mu_s in {agree_s}/{total_s} steps at fixed mu_d, "
-            f"stays level (within 0.5 %) in {ties_s}{span}",
-        }
-    )
-    out.append(
-        {
-            "finding": "On land, less kinetic friction goes further",
-            "verdict": _verdict(agree_d, total_d),
-            "numbers": f"distance falls with mu_d in {agree_d}/{total_d} steps at fixed mu_s, "
-            f"stays level in {ties_d}",
-        }
-    )
+    return [
+        _finding("On land, more static friction goes further", agree_s, total_s,
+                 f"distance rises with mu_s in {agree_s}/{total_s} steps at fixed mu_d, "
+                 f"stays level (within {100 * LEVEL:g} %) in {ties_s}{span}"),
+        _finding("On land, less kinetic friction goes further", agree_d, total_d,
+                 f"distance falls with mu_d in {agree_d}/{total_d} steps at fixed mu_s, stays level in {ties_d}"),
+    ]
 
-    # 7. feedback goes further on land at a higher energy cost
+
+def _feedback_on_land(c: list[dict]) -> list[dict[str, str]]:
+    """Feedback goes further on land at a higher energy cost."""
+    d_ol = _table(c, "mu_s", "mu_d", "distance", controller="inching")
     d_cl = _table(c, "mu_s", "mu_d", "distance", controller="inching-pid")
     f_ol = _table(c, "mu_s", "mu_d", "energy_friction", controller="inching")
     f_cl = _table(c, "mu_s", "mu_d", "energy_friction", controller="inching-pid")
@@ -234,21 +274,30 @@ def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict
     dearer = sum(f_cl[k] > f_ol[k] for k in both)
     tot_ol = sum(d_ol[k] for k in both)
     tot_cl = sum(d_cl[k] for k in both)
-    out.append(
-        {
-            "finding": "On land, feedback goes further",
-            "verdict": _verdict(further, len(both)),
-            "numbers": f"closed loop further in {further}/{len(both)} cells; summed distance {tot_cl:.3f} m vs {tot_ol:.3f} m open loop",
-        }
-    )
-    out.append(
-        {
-            "finding": "On land, feedback costs more energy",
-            "verdict": _verdict(dearer, len(both)),
-            "numbers": f"closed-loop friction energy higher in {dearer}/{len(both)} cells",
-        }
-    )
-    return out
+    return [
+        _finding("On land, feedback goes further", further, len(both),
+                 f"closed loop further in {further}/{len(both)} cells; summed distance {tot_cl:.3f} m vs {tot_ol:.3f} m open loop"),
+        _finding("On land, feedback costs more energy", dearer, len(both),
+                 f"closed-loop friction energy higher in {dearer}/{len(both)} cells"),
+    ]
+
+
+def findings(gait: list[dict], stiff: list[dict], inch: list[dict]) -> list[dict[str, str]]:
+    """The thesis's findings with our verdicts and numbers, from the rows of the three studies."""
+    g = _ok(gait)
+    ol = _table(g, "alpha", "omega", "average_speed", controller="open-loop")
+    pid = _table(g, "alpha", "omega", "average_speed", controller="pid")
+    power = _table(g, "alpha", "omega", "mean_fluid_power", controller="open-loop")
+    land = [r for r in inch if not r.get("failure")]
+    return [
+        *_speed_rises_with_frequency(ol, pid),
+        *_speed_peaks_inside(ol),
+        *_power_rises(power),
+        *_stiffer_is_faster(stiff),
+        *_feedback_in_water(g, ol, pid, power),
+        *_friction(land),
+        *_feedback_on_land(land),
+    ]
 
 
 def _land_numbers(inch: list[dict[str, Any]]) -> dict[str, Any]:
@@ -287,11 +336,13 @@ def _land_numbers(inch: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 #: The sources' headline case (issue 9, item 6): the thesis gait's frequency, two amplitudes, the
-#: actual-curvature PID with gains (10, 1, 5) and the open loop, for each physics model.
+#: actual-curvature PID with gains (Kp, Kd, Ki) = :data:`HEADLINE_GAINS` and the open loop, for
+#: each physics model.
 HEADLINE_OMEGA = 2 * math.pi / 3
 HEADLINE_ALPHAS = (math.pi / 6, math.pi / 3)
+HEADLINE_GAINS = {"Kp": 10, "Kd": 1, "Ki": 5}
 HEADLINE_CONTROLLERS = {
-    "PID (10, 1, 5)": ("pid", {"Kp": 10, "Kd": 1, "Ki": 5}),
+    f"PID {_gains(HEADLINE_GAINS)}": ("pid", HEADLINE_GAINS),
     "open loop": ("open-loop", {}),
 }
 HEADLINE_MODELS = {"default": None, "thesis preset": "thesis"}
@@ -379,145 +430,177 @@ def headline_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def write_report(path: Path, img: Path, facts: list[dict[str, str]], extras: dict[str, Any]) -> Path:
-    """Write the Markdown report (figures are linked relative to it)."""
-    land = extras.get("land") or _land_numbers([])
-    rel = img.relative_to(path.parent) if img.is_relative_to(path.parent) else img
+def model_departures(grid: StudyGrid) -> dict[str, float]:
+    """The numbers of the report's "where the model departs" and "trajectories" sections that
+    the sweeps do not give, each from a short run.
+
+    Returns:
+        ``soft_error``: mean curvature error [-] of open loop and PID at the thesis gait at
+        ``E_bend`` = :data:`SOFT_E_BEND` (one swim-gait cell each);
+        ``stiff_error_open_loop``, ``stiff_error_pid``: mean curvature error [-] at the default
+        stiffness, as ``soft-snake evaluate SoftEel-v0 --policy open-loop`` / ``pid`` reports it
+        (3 episodes, seeds 0-2, 2 s transient);
+        ``sine_distance``: distance [m] of the sinusoidal inching wave in ``grid.inch_duration``
+        on the default ground;
+        ``unsettled_error``: mean curvature error [-] after :data:`SETTLED_AFTER` s of the
+        decentralized PID with the gains :class:`PIDParams` defaults to, from rest on the gait.
+    """
+    gait = SerpenoidParams()
+    soft = [
+        run_cell({"study": "swim-gait", "controller": c, "alpha": gait.alpha, "omega": gait.omega,
+                  "E_bend": SOFT_E_BEND}, grid)["curvature_error"]
+        for c in STUDIES["swim-gait"].controllers
+    ]
+    stiff = {}
+    for spec in ("open-loop", "pid"):
+        env = make_eval_env("SoftEel-v0", seed=0)
+        stiff[spec] = summarize(evaluate(make_policy(spec, env), env, episodes=3, transient=2.0))["curvature_error"][0]
+        env.close()
+    kwargs = {"reset_noise_scale": 0.0}
+    kwargs["max_episode_steps"] = int(round(grid.inch_duration / control_step("SoftWorm-v0", kwargs)))
+    env = make_eval_env("SoftWorm-v0", seed=0, env_kwargs=kwargs)
+    sine = evaluate(make_policy("inching:wave=sine", env), env, episodes=1, transient=0.0)[0]["distance"]
+    env.close()
+    spec = "decentralized:" + ",".join(f"{k}={getattr(PIDParams(), k)!r}" for k in ("Kp", "Kd", "Ki"))
+    chain = rollout("SoftEel-v0", spec, 6.0, env_kwargs={"reset_noise_scale": 0.0}, reset_options=rest_start_options())
+    return {
+        "soft_error": float(np.mean(soft)),
+        "stiff_error_open_loop": stiff["open-loop"],
+        "stiff_error_pid": stiff["pid"],
+        "sine_distance": sine,
+        "unsettled_error": mean_error_after(chain),
+    }
+
+
+def _kappa_des_amplitude(samples: int = 360) -> float:
+    """The largest desired curvature [-] of the thesis gait over one period (N = Rod().N)."""
+    p = SerpenoidParams()
+    n = Rod().N - 2
+    delta = p.delta if p.delta is not None else 2 * math.pi / n  # SerpenoidParams' default
+    period = 2 * math.pi / p.omega
+    return max(
+        float(np.abs(serpenoid(serpenoid_phase(t, n, p.omega, delta), p.omega, p.alpha)[0]).max())
+        for t in np.linspace(0.0, period, samples, endpoint=False)
+    )
+
+
+def _parameters(grid: StudyGrid) -> dict[str, str]:
+    """The report's numbers that are the package's own parameters."""
+    rod = Rod()
+    soft = Rod(E_bend=SOFT_E_BEND)
+    inch = InchingPIDParams()
+    centralized = PIDParams(**parse_policy_spec(COMPARISON_CENTRALIZED)[1])
+    return {
+        "yes_percent": f"{100 * YES_FRACTION:g}",
+        "partly_percent": f"{100 * PARTLY_FRACTION:g}",
+        "headline_gains": _gains(HEADLINE_GAINS),
+        "headline_omega": _pi_text(HEADLINE_OMEGA),
+        "default_E": _sci(rod.E),
+        "soft_E_bend": _sci(SOFT_E_BEND),
+        "soft_EI_per_node": f"{soft.EI / soft.edge_length:.2f}",  # lvor = l for an interior node
+        "kappa_des_amplitude": f"{_kappa_des_amplitude():.2f}",
+        "saturation": f"{PIDParams().saturation:g}",
+        "pulse_duty": f"{PULSE_DUTY:g}",
+        "inch_duration": f"{grid.inch_duration:g}",
+        "pid_gains": _gains(PIDParams()),
+        "decentralized_gains": _gains(DecentralizedParams()),
+        "comparison_gains": (_gains(centralized) if _gains(centralized) == _gains(DecentralizedParams())
+                             else f"{_gains(centralized)} and {_gains(DecentralizedParams())}"),
+        "n_nodes": f"{rod.N}",
+        "transient_cycles": f"{grid.transient_cycles}",
+        "cycles": f"{grid.cycles}",
+        "soft_gains": _gains(SOFT_GAINS),
+        "rest_gain": f"{OpenLoopParams().rest_gain:g}",
+        "inch_eps": f"{inch.eps:g}",
+        "inch_omega": _pi_text(inch.omega),
+        "inch_delta_l": _pi_text(inch.delta_l if inch.delta_l is not None else 2 * math.pi / (rod.N - 1), " / "),
+        "inch_Kp": f"{inch.Kp:g}",
+        "settled_after": f"{SETTLED_AFTER:g}",
+    }
+
+
+def _figures(rel: Path, grid: StudyGrid) -> dict[str, str]:
+    """The figure blocks, captions with the grid's own numbers."""
 
     def fig(name: str, caption: str) -> str:
         return f"![{caption}]({rel.as_posix()}/{name})\n\n*{caption}*\n"
 
-    rows = "\n".join(f"| {f['finding']} | **{f['verdict']}** | {f['numbers']} |" for f in facts)
+    t = f"{grid.inch_duration:g}"
+    return {
+        "fig_gait_speed": fig("swim-gait_average_speed.png",
+                              f"Average speed, open loop (left) and PID {_gains(SOFT_GAINS)} (right)"),
+        "fig_gait_error": fig("swim-gait_curvature_error.png", "Mean curvature error |kappa_des - kappa|"),
+        "fig_gait_power": fig("swim-gait_mean_fluid_power.png", "Mean power lost to the fluid"),
+        "fig_stiff_speed": fig("swim-stiffness_average_speed.png",
+                               f"Open-loop average speed at {_count(len(grid.e_bend))} bending moduli"),
+        "fig_stiff_power": fig("swim-stiffness_mean_fluid_power.png",
+                               f"Open-loop fluid power at {_count(len(grid.e_bend))} bending moduli"),
+        "fig_inch_distance": fig("inch-friction_distance.png",
+                                 f"Distance in {t} s, open loop (left) and closed loop (right)"),
+        "fig_inch_energy": fig("inch-friction_energy_friction.png", f"Energy lost to friction in {t} s"),
+        "fig_inch_length": fig("inch-friction_length_error.png", "Mean edge-length error |lbar_des - |e||"),
+        "fig_snapshots": fig("swim_snapshots.png", "Swimming snapshots over one gait cycle (PID, thesis gait, "
+                             "default stiffness), coloured by time, with head, tail and centre-of-mass traces"),
+        "fig_comparison": fig("centralized_vs_decentralized.png",
+                              "Centralized vs decentralized PID from rest with curvature equal to the desired one"),
+    }
+
+
+def write_report(path: Path, img: Path, facts: list[dict[str, str]], extras: dict[str, Any]) -> Path:
+    """Write the Markdown report from :data:`TEMPLATE` (figures are linked relative to it).
+
+    Args:
+        path: the report.
+        img: the folder of the figures and CSVs.
+        facts: :func:`findings`.
+        extras: what the run computed: ``grid`` (the text), ``sweeps`` (study -> cells, cpu,
+            computed, seconds), ``comparison_errors``, and optionally ``grid_params`` (the
+            :class:`StudyGrid`), ``workers``, ``headline`` with ``headline_window`` and
+            ``headline_seconds``, ``land`` (:func:`_land_numbers`), ``inch_distance`` (the
+            median inching distance [m]) and ``departures`` (:func:`model_departures`); what is
+            missing reads "n/a".
+    """
+    grid = extras.get("grid_params") or StudyGrid()
+    land = extras.get("land") or _land_numbers([])
+    rel = img.relative_to(path.parent) if img.is_relative_to(path.parent) else img
     headline = extras.get("headline")
-    headline = headline_table(headline) if headline else "(not computed in this run)"
     cmp_ = extras["comparison_errors"]
-    timings = "\n".join(
-        f"| {k} | {v['cells']} | {v['cpu']:.0f} | {v['computed']} | {v['seconds']:.0f} |"
-        for k, v in extras["sweeps"].items()
-    )
-    text = f"""# Reproducing the thesis's findings
+    dep = extras.get("departures") or {}
 
-This page is generated by
+    def number(value: float | None, fmt: str) -> str:
+        return "n/a" if value is None or not math.isfinite(value) else format(value, fmt)
 
-```bash
-soft-snake reproduce --out docs
-```
-
-which runs the three parameter studies (`soft-snake sweep all --out docs/img`, resumable: cells
-already in the CSVs are not recomputed), draws the two trajectory figures (`soft-snake figures
---out docs/img`) and rewrites this file from the CSVs. Every number below comes from those
-CSVs (`docs/img/*.csv`). Defaults: {extras["grid"]}.
-
-Verdicts count comparisons between neighbouring grid cells: **yes** when at least 80 % go the
-way the thesis states, **partly** from 50 %, **no** below. Cells whose body self-intersected
-(the amplitude is near the geometric limit and the soft body over-bends) are excluded and
-marked "fail" in the heatmaps.
-
-## The sources' headline case
-
-The actual-curvature PID with gains (10, 1, 5) and the open loop at omega = 2 pi/3 rad/s, each
-starting at rest on its gait (curvatures and rest curvatures equal to the desired ones at
-t = 0, no start noise: the env keyword `start_on_gait`, `soft-snake evaluate --start-on-gait`),
-default stiffness (E = 1.875e6 Pa). Speed (the centre of mass's displacement over the window,
-whatever its direction, per time: started on the gait, the body does not swim exactly along its
-initial chord), fluid power and mean curvature error `|kappa_des - kappa|` are averaged over {extras.get("headline_window", "the steady state")}.
-"default" is the package's physics; "thesis preset" is `preset="thesis"`, the sources'
-setting (no material damping, Kelasidi added mass), whose closed-loop results depend on the
-integration step. Computed by `soft-snake reproduce --headline-only` (which prints this table
-alone, in about half a minute).
-
-{headline}
-
-## Findings
-
-| Finding (thesis, in words) | Our model | Numbers |
-|---|---|---|
-{rows}
-
-## Where the model departs from the thesis, and why
-
-- **Curvature error under feedback at E_bend = 1.87e4 Pa.** At this softness the bending
-  stiffness per node, `EI / lvor` = 0.56 N m, is small against the fluid's moments, so the body
-  lags the gait by a large fraction of its amplitude with either controller (error ~0.3 against
-  a desired amplitude of 0.54 at the thesis gait). The PID's input is capped at
-  `1.5 alpha omega`; it spends much of the cycle saturated and cannot pull the body onto the
-  gait, and the integral term then adds phase lag. Feedback still buys speed in most cells
-  at a higher energy cost. At the default stiffness (1.875e6 Pa) the PID does cut the error,
-  from 0.0196 (open loop) to 0.0070 (`soft-snake evaluate SoftEel-v0 --policy open-loop` / `pid`).
-- **Friction on land, on the converged contact.** The default gait is the peristaltic pulse
-  (`wave="pulse"`, duty 0.6): it compresses a few edges at a time and anchors the rest on
-  static friction, so it carries the worm about 1.3 m in 10 s at every (mu_s, mu_d) of the
-  grid, open or closed loop. Friction decides what sliding costs more than how far the worm
-  goes: the friction energy is `mu_d m g` times the sliding path and does not depend on mu_s
-  ({land["energy_low"]}). More static friction anchors a little better: at mu_d =
-  {land["mu_d_low"]:.2f} the open-loop distance goes {land["row_low"]} m for mu_s =
-  {land["mu_s_list"]}. More kinetic friction costs a little distance: at mu_s =
-  {land["mu_s_high"]:.2f} the open loop goes {land["col_high"]} m for mu_d = {land["mu_d_list"]}.
-  The sources' sinusoidal wave (`inching:wave=sine`) changes every edge at once, anchors
-  little, and moves the worm a few millimetres in 10 s; the 0.10 m this package once reported
-  for it came from the time step (stick-slip decided at the start of each step anchored nodes
-  that the model lets slip; docs/model.md §5).
-- **Decentralized gains.** See the last section: with (10, 1, 5) the neighbour-to-neighbour
-  chain does not settle; with (10, 2, 1) it does, as the thesis describes.
-
-## Set-up
-
-- Swimming cells (`swim-gait`, `swim-stiffness`): `SoftEel-v0`, N = 10, start straight and at
-  rest, no reset noise; `transient_cycles` = 1 gait period is discarded, speed, curvature error
-  and fluid power are averaged over the next `cycles` = 2 periods. `swim-gait` uses
-  E_bend = 1.87e4 Pa (the sources' captions) and the PID gains (10, 2, 1) (docs/model.md §9: (10, 1, 5)
-  can fold the body at that softness); `swim-stiffness` runs the open loop at several E_bend.
-  The env's `max_curvature_rate` is raised per cell so that neither the open-loop rate nor the
-  PID's saturation `1.5 alpha omega` is clipped.
-- Open loop is `u = kappa_dot_des + rest_gain (kappa_des - kbar)` with `rest_gain` = 10 1/s: from
-  a straight start this brings the rest curvature onto the gait within a few tenths of a second,
-  then it is the thesis's `u = kappa_dot_des` (see `soft_snake_gym/policies/open_loop.py`).
-- Inching cells (`inch-friction`): `SoftWorm-v0`, 10 s, the default gait: the peristaltic
-  pulse, eps = 0.3, omega = 2 pi rad/s, delta_l = 2 pi / 9, duty 0.6, travelling tail to
-  head, which moves the worm **toward its head** (+x); closed loop Kp = 10 1/s. Distance is
-  the centre-of-mass progress over the episode.
-
-## Sweep timings (this machine, 2 cores shared with other work)
-
-| study | cells | sum of per-cell times [s] | cells computed in the run that wrote this page | its wall time [s] |
-|---|---|---|---|---|
-{timings}
-
-The last column is the wall time of each sweep in the run that wrote this page (2 worker
-processes; the first cell of each worker also pays for importing torch and SB3, about 2 s); a
-rerun with the CSVs in place recomputes nothing and only draws the figures.
-
-## Swimming: amplitude × frequency at E_bend = 1.87e4 Pa
-
-{fig("swim-gait_average_speed.png", "Average speed, open loop (left) and PID (10, 2, 1) (right)")}
-{fig("swim-gait_curvature_error.png", "Mean curvature error |kappa_des - kappa|")}
-{fig("swim-gait_mean_fluid_power.png", "Mean power lost to the fluid")}
-
-## Swimming: open-loop speed for several bending stiffnesses
-
-{fig("swim-stiffness_average_speed.png", "Open-loop average speed at three bending moduli")}
-{fig("swim-stiffness_mean_fluid_power.png", "Open-loop fluid power at three bending moduli")}
-
-## Inching: static × kinetic friction
-
-{fig("inch-friction_distance.png", "Distance in 10 s, open loop (left) and closed loop (right)")}
-{fig("inch-friction_energy_friction.png", "Energy lost to friction in 10 s")}
-{fig("inch-friction_length_error.png", "Mean edge-length error |lbar_des - |e||")}
-
-## Trajectories
-
-{fig("swim_snapshots.png", "Swimming snapshots over one gait cycle (PID, thesis gait, default stiffness), coloured by time, with head, tail and centre-of-mass traces")}
-{fig("centralized_vs_decentralized.png", "Centralized vs decentralized PID from rest with curvature equal to the desired one")}
-
-From rest, with the curvatures equal to the desired ones at t = 0, the mean curvature error
-after 2 s is {cmp_["centralized"]:.4f} with the centralized clock and {cmp_["decentralized"]:.4f}
-with the decentralized circulant closure (both with gains (10, 2, 1)); both settle within about
-a second, the decentralized one with a slightly larger error, as the thesis states. With the
-thesis's first gain set (10, 1, 5) the decentralized chain does **not** settle in this model
-(error ~0.05-0.1, see `soft_snake_gym/policies/decentralized.py`), which is why the
-decentralized default gains are (10, 2, 1).
-"""
-    path.write_text(text)
+    values = {
+        **_parameters(grid),
+        **_figures(rel, grid),
+        "grid": extras["grid"],
+        "headline": headline_table(headline) if headline else "(not computed in this run)",
+        "headline_window": extras.get("headline_window", "the steady state"),
+        "headline_seconds": number(extras.get("headline_seconds"), ".0f"),
+        "findings": "\n".join(f"| {f['finding']} | **{f['verdict']}** | {f['numbers']} |" for f in facts),
+        "soft_error": number(dep.get("soft_error"), ".1f"),
+        "stiff_error_open_loop": number(dep.get("stiff_error_open_loop"), ".4f"),
+        "stiff_error_pid": number(dep.get("stiff_error_pid"), ".4f"),
+        "pulse_distance": number(extras.get("inch_distance"), ".1f"),
+        "energy_low": land["energy_low"],
+        "mu_d_low": f"{land['mu_d_low']:.2f}",
+        "row_low": land["row_low"],
+        "mu_s_list": land["mu_s_list"],
+        "mu_s_high": f"{land['mu_s_high']:.2f}",
+        "col_high": land["col_high"],
+        "mu_d_list": land["mu_d_list"],
+        "sine_distance_mm": number(1000 * dep["sine_distance"] if "sine_distance" in dep else None, ".0f"),
+        "cores": f"{os.cpu_count() or 1}",
+        "workers": f"{extras.get('workers', 'n/a')}",
+        "timings": "\n".join(
+            f"| {k} | {v['cells']} | {v['cpu']:.0f} | {v['computed']} | {v['seconds']:.0f} |"
+            for k, v in extras["sweeps"].items()
+        ),
+        "error_centralized": f"{cmp_['centralized']:.4f}",
+        "error_decentralized": f"{cmp_['decentralized']:.4f}",
+        "unsettled_error": number(dep.get("unsettled_error"), ".2f"),
+    }
+    path.write_text(string.Template(TEMPLATE.read_text()).substitute(values))
     return path
 
 
@@ -541,13 +624,20 @@ def reproduce(out: str | Path = "docs", workers: int | None = None, progress: bo
         }
     extras = make_all_figures(img)
     extras["sweeps"] = sweeps
+    extras["grid_params"] = grid
+    extras["workers"] = max(1, workers or os.cpu_count() or 1)
+    t0 = time.perf_counter()
     extras["headline"] = headline_case()
+    extras["headline_seconds"] = time.perf_counter() - t0
     extras["headline_window"] = headline_window()
     extras["grid"] = (
-        f"alpha {grid.n_alpha} values up to 0.95 x the self-intersection limit, omega {grid.n_omega} "
+        f"alpha {grid.n_alpha} values up to {ALPHA_MAX_FRACTION:g} x the self-intersection limit, omega {grid.n_omega} "
         f"values in [{grid.omega_min}, {grid.omega_max:.3f}] rad/s, E_bend {list(grid.e_bend)} Pa, "
         f"mu {grid.n_mu} values in [{grid.mu_s_min}, {grid.mu_s_max}] with mu_d <= mu_s"
     )
     facts = findings(rows["swim-gait"], rows["swim-stiffness"], rows["inch-friction"])
     extras["land"] = _land_numbers(rows["inch-friction"])
+    distances = [r["distance"] for r in rows["inch-friction"] if not r.get("failure")]
+    extras["inch_distance"] = float(np.median(distances)) if distances else None
+    extras["departures"] = model_departures(grid)
     return write_report(out / "thesis_reproduction.md", img, facts, extras)

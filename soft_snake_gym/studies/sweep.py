@@ -60,13 +60,16 @@ SOFT_E_BEND = 1.87e4
 SOFT_GAINS = {"Kp": 10.0, "Kd": 2.0, "Ki": 1.0}
 """PID gains the sources use at that softness (docs/model.md §9)."""
 
+ALPHA_MAX_FRACTION = 0.95
+"""The default largest amplitude, as a fraction of the serpenoid's self-intersection limit."""
+
 
 @dataclass(frozen=True)
 class StudyGrid:
     """Grid bounds and resolution; every field is a ``soft-snake sweep`` option."""
 
     alpha_min: float = 0.15
-    alpha_max: float | None = None  # None: 0.95 x the self-intersection limit
+    alpha_max: float | None = None  # None: ALPHA_MAX_FRACTION x the self-intersection limit
     n_alpha: int = 8
     omega_min: float = 0.5
     omega_max: float = math.pi
@@ -81,7 +84,8 @@ class StudyGrid:
     inch_transient: float = 1.0
 
     def alphas(self) -> np.ndarray:
-        hi = 0.95 * max_serpenoid_amplitude(10, math.pi / 4) if self.alpha_max is None else self.alpha_max
+        hi = (ALPHA_MAX_FRACTION * max_serpenoid_amplitude(10, math.pi / 4) if self.alpha_max is None
+              else self.alpha_max)
         return np.round(np.linspace(self.alpha_min, hi, self.n_alpha), 4)
 
     def omegas(self) -> np.ndarray:
