@@ -135,6 +135,11 @@ def _pairs_increasing(table: dict, along: int, with_ties: bool = False):
     return (agree, ties, total) if with_ties else (agree, total)
 
 
+def _more(a: dict, b: dict, keys: list) -> int:
+    """How many of ``keys`` have ``a[k] > b[k]``."""
+    return sum(a[k] > b[k] for k in keys)
+
+
 def _finding(finding: str, agree: int, total: int, numbers: str) -> dict[str, str]:
     return {"finding": finding, "verdict": _verdict(agree, total), "numbers": numbers}
 
@@ -217,10 +222,10 @@ def _feedback_in_water(g: list[dict], ol: dict, pid: dict, p_ol: dict) -> list[d
     e_ol = _table(g, "alpha", "omega", "energy_actuator", controller="open-loop")
     e_pid = _table(g, "alpha", "omega", "energy_actuator", controller="pid")
     both = sorted(set(ol) & set(pid))
-    faster = sum(pid[k] > ol[k] for k in both)
-    lower_err = sum(err_pid[k] < err_ol[k] for k in both)
-    costlier = sum(p_pid[k] > p_ol[k] for k in both)
-    act_costlier = sum(e_pid[k] > e_ol[k] for k in both)
+    faster = _more(pid, ol, both)
+    lower_err = _more(err_ol, err_pid, both)
+    costlier = _more(p_pid, p_ol, both)
+    act_costlier = _more(e_pid, e_ol, both)
     ratio = np.median([pid[k] / ol[k] for k in both if ol[k] > 0]) if both else math.nan
     eratio = np.median([err_pid[k] / err_ol[k] for k in both]) if both else math.nan
     n = len(both)
@@ -270,8 +275,8 @@ def _feedback_on_land(c: list[dict]) -> list[dict[str, str]]:
     f_ol = _table(c, "mu_s", "mu_d", "energy_friction", controller="inching")
     f_cl = _table(c, "mu_s", "mu_d", "energy_friction", controller="inching-pid")
     both = sorted(set(d_ol) & set(d_cl))
-    further = sum(d_cl[k] > d_ol[k] for k in both)
-    dearer = sum(f_cl[k] > f_ol[k] for k in both)
+    further = _more(d_cl, d_ol, both)
+    dearer = _more(f_cl, f_ol, both)
     tot_ol = sum(d_ol[k] for k in both)
     tot_cl = sum(d_cl[k] for k in both)
     return [
@@ -591,7 +596,8 @@ def write_report(path: Path, img: Path, facts: list[dict[str, str]], extras: dic
         "mu_d_list": land["mu_d_list"],
         "sine_distance_mm": number(1000 * dep["sine_distance"] if "sine_distance" in dep else None, ".0f"),
         "cores": f"{os.cpu_count() or 1}",
-        "workers": f"{extras.get('workers', 'n/a')}",
+        "workers": (f"{extras['workers']} worker process{'es' if extras['workers'] != 1 else ''}"
+                    if "workers" in extras else "n/a worker processes"),
         "timings": "\n".join(
             f"| {k} | {v['cells']} | {v['cpu']:.0f} | {v['computed']} | {v['seconds']:.0f} |"
             for k, v in extras["sweeps"].items()
