@@ -42,3 +42,51 @@ def test_the_report_fills_every_placeholder(tmp_path):
     assert "with gains (10, 1, 5) and the open loop at omega = 2 pi/3 rad/s" in text  # HEADLINE_GAINS, _OMEGA
     assert "0.0100 with the centralized clock and 0.0200" in text
     assert Path(reproduce.__file__).with_name("thesis_reproduction.md") == reproduce.TEMPLATE
+
+
+def _capture(monkeypatch) -> list:
+    """Keep each figure drawn (and still write it)."""
+    from soft_snake_gym import plots
+
+    drawn = []
+    save = plots._save
+    monkeypatch.setattr(plots, "_save", lambda fig, path, dpi: drawn.append(fig) or save(fig, path, dpi))
+    return drawn
+
+
+def test_comparison_chart_draws_each_policys_mean_with_its_std(tmp_path, monkeypatch):
+    from soft_snake_gym import plots
+
+    drawn = _capture(monkeypatch)
+    results = {"pid": {"average_speed": (0.1, 0.01)}, "open-loop": {"average_speed": (0.2, 0.03)}}
+    path = plots.comparison_chart(results, [("average_speed", "average speed", "m/s")], tmp_path / "c" / "x.png")
+    assert path.is_file()
+    ax = drawn[0].axes[0]
+    assert [p.get_height() for p in ax.patches] == [0.1, 0.2]
+    assert ax.get_ylabel() == "average speed [m/s]"
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["pid", "open-loop"]
+
+
+def test_learning_curve_is_drawn_from_the_run_folder(tmp_path, monkeypatch):
+    import csv
+
+    import yaml
+
+    from soft_snake_gym.training import load_train_config, plot_learning_curve
+
+    cfg = load_train_config("SoftEel-v0", overrides={"eval_episodes": 2, "eval_freq": 100})
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False))
+    rows = [{"timesteps": s, "return_mean": 1.0, "average_speed_mean": v, "average_speed_std": 0.01,
+             "cost_of_transport_mean": 2.0, "cost_of_transport_std": 0.1, "baseline_average_speed": 0.05,
+             "baseline_cost_of_transport": 3.0} for s, v in ((100, 0.02), (200, 0.04))]
+    with open(tmp_path / "learning_curve.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    drawn = _capture(monkeypatch)
+    assert plot_learning_curve(tmp_path) == tmp_path / "learning_curve.png"
+    speed = drawn[0].axes[0]
+    agent, baseline = speed.lines[0], speed.lines[1]
+    assert list(agent.get_xdata()) == [100, 200] and list(agent.get_ydata()) == [0.02, 0.04]
+    assert list(baseline.get_ydata()) == [0.05, 0.05]
+    assert "2 fixed seeds every 100 steps" in drawn[0].get_suptitle()
