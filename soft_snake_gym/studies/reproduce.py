@@ -440,8 +440,8 @@ def model_departures(grid: StudyGrid) -> dict[str, float]:
     the sweeps do not give, each from a short run.
 
     Returns:
-        ``soft_error``: mean curvature error [-] of open loop and PID at the thesis gait at
-        ``E_bend`` = :data:`SOFT_E_BEND` (one swim-gait cell each);
+        ``soft_error_open_loop``, ``soft_error_pid``: mean curvature error [-] of each at the
+        thesis gait at ``E_bend`` = :data:`SOFT_E_BEND` (one swim-gait cell each);
         ``stiff_error_open_loop``, ``stiff_error_pid``: mean curvature error [-] at the default
         stiffness, as ``soft-snake evaluate SoftEel-v0 --policy open-loop`` / ``pid`` reports it
         (3 episodes, seeds 0-2, 2 s transient);
@@ -451,11 +451,11 @@ def model_departures(grid: StudyGrid) -> dict[str, float]:
         decentralized PID with the gains :class:`PIDParams` defaults to, from rest on the gait.
     """
     gait = SerpenoidParams()
-    soft = [
-        run_cell({"study": "swim-gait", "controller": c, "alpha": gait.alpha, "omega": gait.omega,
-                  "E_bend": SOFT_E_BEND}, grid)["curvature_error"]
-        for c in STUDIES["swim-gait"].controllers
-    ]
+    soft = {
+        c: run_cell({"study": "swim-gait", "controller": c, "alpha": gait.alpha, "omega": gait.omega,
+                     "E_bend": SOFT_E_BEND}, grid)["curvature_error"]
+        for c in ("open-loop", "pid")
+    }
     stiff = {}
     for spec in ("open-loop", "pid"):
         env = make_eval_env("SoftEel-v0", seed=0)
@@ -469,7 +469,8 @@ def model_departures(grid: StudyGrid) -> dict[str, float]:
     spec = "decentralized:" + ",".join(f"{k}={getattr(PIDParams(), k)!r}" for k in ("Kp", "Kd", "Ki"))
     chain = rollout("SoftEel-v0", spec, 6.0, env_kwargs={"reset_noise_scale": 0.0}, reset_options=rest_start_options())
     return {
-        "soft_error": float(np.mean(soft)),
+        "soft_error_open_loop": soft["open-loop"],
+        "soft_error_pid": soft["pid"],
         "stiff_error_open_loop": stiff["open-loop"],
         "stiff_error_pid": stiff["pid"],
         "sine_distance": sine,
@@ -583,7 +584,8 @@ def write_report(path: Path, img: Path, facts: list[dict[str, str]], extras: dic
         "headline_window": extras.get("headline_window", "the steady state"),
         "headline_seconds": number(extras.get("headline_seconds"), ".0f"),
         "findings": "\n".join(f"| {f['finding']} | **{f['verdict']}** | {f['numbers']} |" for f in facts),
-        "soft_error": number(dep.get("soft_error"), ".1f"),
+        "soft_error_open_loop": number(dep.get("soft_error_open_loop"), ".2f"),
+        "soft_error_pid": number(dep.get("soft_error_pid"), ".2f"),
         "stiff_error_open_loop": number(dep.get("stiff_error_open_loop"), ".4f"),
         "stiff_error_pid": number(dep.get("stiff_error_pid"), ".4f"),
         "pulse_distance": number(extras.get("inch_distance"), ".1f"),
