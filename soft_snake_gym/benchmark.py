@@ -30,7 +30,6 @@ import platform
 import statistics
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -42,7 +41,7 @@ from soft_snake_gym.config import load_yaml, shipped_configs
 from soft_snake_gym.envs.vector import ROBOTS_PER_THREAD
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
 
-__all__ = ["run_benchmark", "format_report", "plot_benchmark", "DEFAULT_ROBOTS", "DEFAULT_NODES"]
+__all__ = ["run_benchmark", "format_report", "DEFAULT_ROBOTS", "DEFAULT_NODES"]
 
 DEFAULT_ROBOTS = (1, 16, 256, 1024)
 DEFAULT_NODES = (10, 20, 50, 100)
@@ -370,45 +369,3 @@ def format_report(res: dict[str, Any]) -> str:
         lines.append(f"  cost per robot step, N = {res['nodes'][-1]['N']} vs {res['nodes'][0]['N']}, over linear: "
                      f"{g:.2f} ({'no faster than linear' if g <= 1.05 else 'FASTER than linear'})")
     return "\n".join(lines)
-
-
-def plot_benchmark(res: dict[str, Any], path: str | Path) -> Path:
-    """Throughput bars (log scale) and cost per robot step against N, as a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.8), gridspec_kw={"width_ratios": [1.6, 1]})
-    rows = res["throughput"] + [{"case": f"PPO learn, {r['kind']} (n_envs={r['n_envs']})",
-                                 "steps_per_s": r["steps_per_s"]} for r in res["ppo"]]
-    names = [r["case"] for r in rows]
-    vals = [r["steps_per_s"] for r in rows]
-    colors = ["#1f77b4" if "SoftEel" in n else "#ff7f0e" if "Swimmer" in n else "#2ca02c" for n in names]
-    y = np.arange(len(rows))
-    ax1.barh(y, vals, color=colors)
-    ax1.set_yticks(y, names, fontsize=7)
-    ax1.invert_yaxis()
-    ax1.set_xscale("log")
-    ax1.set_xlabel("robot-steps per second (median round)")
-    swimmer = _rate(res, "Swimmer-v5 gym.make")
-    if swimmer:
-        ax1.axvline(swimmer, color="#ff7f0e", ls="--", lw=1)
-        ax1.axvline(10 * swimmer, color="#ff7f0e", ls=":", lw=1)
-        ax1.text(10 * swimmer, len(rows) - 0.5, " 10x Swimmer-v5", fontsize=7, color="#ff7f0e")
-    ax1.set_title("Throughput, one run, one machine", fontsize=10)
-    if res["nodes"]:
-        N = np.array([r["N"] for r in res["nodes"]], dtype=float)
-        us = np.array([r["us_per_robot_step"] for r in res["nodes"]])
-        ax2.loglog(N, us, "o-", label="batched SoftEel, 1 thread")
-        ax2.loglog(N, us[0] * N / N[0], "k--", lw=1, label="linear in N")
-        ax2.set_xlabel("nodes N")
-        ax2.set_ylabel("microseconds per robot step")
-        ax2.set_title(f"Cost per step against N ({res['nodes'][0]['robots']} robots)", fontsize=10)
-        ax2.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path

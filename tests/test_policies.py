@@ -13,7 +13,6 @@ import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.agents import make_policy
 from soft_snake_gym.config import ConfigError
 from soft_snake_gym.evaluation import evaluate, make_eval_env
-from soft_snake_gym.figures import rest_start_options, rollout
 from soft_snake_gym.policies import (
     BASELINES,
     CurvaturePID,
@@ -24,6 +23,7 @@ from soft_snake_gym.policies import (
     PolicyEnvMismatch,
     parse_policy_spec,
 )
+from soft_snake_gym.studies.figures import rest_start_options, rollout
 
 EEL = ["open-loop", "pid", "decentralized", "decentralized:closure=pacemaker"]
 WORM = ["inching", "inching-pid"]

@@ -9,17 +9,17 @@ import pytest
 
 import soft_snake_gym  # noqa: F401
 from soft_snake_gym import Fluid, Rod
-from soft_snake_gym.reproduce import HEADLINE_MODELS, headline_case, headline_table, write_report
+from soft_snake_gym.studies.reproduce import HEADLINE_MODELS, headline_case, headline_table, write_report
 
 
 @pytest.fixture(scope="module")
 def short_headline(request):
     """A short headline case (one amplitude, 1 s window after a 1.5 s transient) with the
     physics each robot ran on, recorded through the eval env factory."""
-    import soft_snake_gym.evaluation as evaluation
+    import soft_snake_gym.studies.reproduce as reproduce
 
     seen = []
-    make = evaluation.make_eval_env
+    make = reproduce.make_eval_env
 
     def recording(env_id, **kw):
         env = make(env_id, **kw)
@@ -28,7 +28,7 @@ def short_headline(request):
         return env
 
     mp = pytest.MonkeyPatch()
-    mp.setattr(evaluation, "make_eval_env", recording)
+    mp.setattr(reproduce, "make_eval_env", recording)
     try:
         rows = headline_case(transient_cycles=0.5, cycles=1 / 3, alphas=(math.pi / 3,))
     finally:

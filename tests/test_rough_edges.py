@@ -220,7 +220,7 @@ def no_work(monkeypatch):
     monkeypatch.setattr(evaluation, "evaluate", boom)
     monkeypatch.setattr(evaluate_cli, "evaluate", boom)  # the commands call the names they import
     monkeypatch.setattr(compare_cli, "compare", boom)
-    import soft_snake_gym.sweep as sweep_mod
+    import soft_snake_gym.studies.sweep as sweep_mod
 
     monkeypatch.setattr(sweep_mod, "run_cell", boom)
 
@@ -388,13 +388,11 @@ def test_sweep_exits_nonzero_when_cells_could_not_run(capsys, no_work, tmp_path)
 
 # --- sweep heatmaps -------------------------------------------------------------------------------
 def test_heatmap_axes_span_the_grid_cells_not_beyond(tmp_path, monkeypatch):
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from soft_snake_gym.figures import cell_edges, sweep_heatmaps
-    from soft_snake_gym.sweep import STUDIES
+    from soft_snake_gym import plots
+    from soft_snake_gym.plots import cell_edges, sweep_heatmaps
+    from soft_snake_gym.studies.sweep import STUDIES
 
     np.testing.assert_allclose(cell_edges([0.15, 1.52]), [0.15, 0.835, 1.52])
     np.testing.assert_allclose(cell_edges([0.2, 0.4, 1.0]), [0.2, 0.3, 0.7, 1.0])  # uneven spacing
@@ -413,13 +411,12 @@ def test_heatmap_axes_span_the_grid_cells_not_beyond(tmp_path, monkeypatch):
         for a in (0.15, 1.52)
         for w in (0.5, 3.1416)
     ]
-    monkeypatch.setattr(plt, "close", lambda fig=None: None)  # keep the figures to inspect them
-    plt.close("all")
-    before = set(plt.get_fignums())
+    drawn = []
+    save = plots._save
+    monkeypatch.setattr(plots, "_save", lambda fig, path, dpi: drawn.append(fig) or save(fig, path, dpi))
     assert sweep_heatmaps(STUDIES["swim-gait"], rows, tmp_path)
-    fig = plt.figure(max(set(plt.get_fignums()) - before))
+    fig = drawn[0]  # average speed: the first metric
+    assert isinstance(fig, Figure) and fig.canvas.get_default_filetype() == "png"
     ax = fig.axes[0]
     assert ax.get_ylim() == pytest.approx((0.15, 1.52)) and ax.get_xlim() == pytest.approx((0.5, 3.1416))
     assert [t.get_text() for t in ax.get_yticklabels()] == ["0.15", "1.52"]
-    for f in plt.get_fignums():
-        matplotlib.pyplot.figure(f).clf()

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from soft_snake_gym.sweep import STUDIES, StudyGrid, cell_key, read_results, run_sweep
+from soft_snake_gym.studies.sweep import STUDIES, StudyGrid, cell_key, read_results, run_sweep
 
 TINY = [
     "--n-mu",
@@ -86,7 +86,7 @@ def test_parallel_swim_cells_match_serial(tmp_path):
 
 
 def test_findings_count_comparisons_the_way_the_thesis_states():
-    from soft_snake_gym.reproduce import findings
+    from soft_snake_gym.studies.reproduce import findings
 
     gait = []
     for ctrl, gain in (("open-loop", 1.0), ("pid", 1.2)):

@@ -221,7 +221,7 @@ def test_planned_steps_round_up_to_whole_rollouts():
 
 
 def test_git_commit_says_when_there_is_no_checkout(tmp_path):
-    from soft_snake_gym.training import NO_CHECKOUT, _git_commit
+    from soft_snake_gym.training.run import NO_CHECKOUT, _git_commit
 
     installed = tmp_path / "site-packages" / "soft_snake_gym"
     installed.mkdir(parents=True)

@@ -1,7 +1,7 @@
 """The ``soft-snake`` command line, on top of the library.
 
 Each command is a module of this package with ``NAME``, ``HELP``, ``add_arguments(parser)`` and
-``run(args) -> exit code``; :func:`build_parser` finds them. Expected problems (a bad option, a
+``run(args) -> exit code``, listed once in :data:`COMMANDS`. Expected problems (a bad option, a
 missing file, a policy for the wrong env: :data:`~soft_snake_gym.cli.common.USER_ERRORS`) are
 reported here as one line on stderr with exit code 2 and no traceback; anything else is a bug
 and keeps its traceback. The library raises; only this package prints.
@@ -10,65 +10,37 @@ and keeps its traceback. The library raises; only this package prints.
 from __future__ import annotations
 
 import argparse
-import importlib
-import pkgutil
 import sys
 import warnings
-from collections.abc import Callable
-from dataclasses import dataclass
 from types import ModuleType
 
-from soft_snake_gym.cli.common import USER_ERRORS, CLIError, Parser, env_kwargs_from_args
+from soft_snake_gym import __version__
+from soft_snake_gym.cli import (
+    benchmark,
+    compare,
+    convergence,
+    evaluate,
+    figures,
+    reproduce,
+    sweep,
+    train,
+)
+from soft_snake_gym.cli.common import USER_ERRORS, CLIError, Parser
 
-__all__ = ["main", "build_parser", "commands", "CLIError", "env_kwargs_from_args", "subcommand"]
+__all__ = ["COMMANDS", "CLIError", "build_parser", "commands", "main"]
+
+
+#: The commands, in the order ``soft-snake --help`` lists them.
+COMMANDS: tuple[ModuleType, ...] = (evaluate, sweep, figures, reproduce, train, compare, benchmark, convergence)
 
 
 def commands() -> dict[str, ModuleType]:
-    """Name -> module of every command: the modules of this package that define ``NAME``."""
-    found = {}
-    for info in pkgutil.iter_modules(__path__):
-        if info.name.startswith("_"):  # __main__ runs the command line when imported
-            continue
-        module = importlib.import_module(f"{__name__}.{info.name}")
-        if hasattr(module, "NAME"):
-            found[module.NAME] = module
-    return found
-
-
-# TRANSITIONAL (issue 10): feature modules that still register their command themselves; removed
-# once every command is a module of this package.
-@dataclass(frozen=True)
-class Subcommand:
-    name: str
-    help: str
-    add_arguments: Callable[[argparse.ArgumentParser], None]
-    run: Callable[[argparse.Namespace], int]
-
-
-SUBCOMMANDS: dict[str, Subcommand] = {}
-
-
-def subcommand(name: str, help: str, add_arguments: Callable[[argparse.ArgumentParser], None]):
-    """TRANSITIONAL: register ``run(args) -> int`` as ``soft-snake NAME`` (decorator)."""
-
-    def register(run: Callable[[argparse.Namespace], int]):
-        SUBCOMMANDS[name] = Subcommand(name, help, add_arguments, run)
-        return run
-
-    return register
-
-
-def _load_subcommands() -> None:
-    for module in ("soft_snake_gym.sweep", "soft_snake_gym.figures", "soft_snake_gym.reproduce",
-                   "soft_snake_gym.training"):
-        importlib.import_module(module)
-# END TRANSITIONAL
+    """Name -> module of every command."""
+    return {module.NAME: module for module in COMMANDS}
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every command."""
-    from soft_snake_gym import __version__
-
     parser = Parser(prog="soft-snake", description="Soft segmented robots: simulate, evaluate, sweep, reproduce.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subs = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=Parser)
@@ -76,11 +48,6 @@ def build_parser() -> argparse.ArgumentParser:
         p = subs.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
         p.set_defaults(_run=module.run, _name=name)
-    _load_subcommands()
-    for sub in SUBCOMMANDS.values():
-        p = subs.add_parser(sub.name, help=sub.help, description=sub.help)
-        sub.add_arguments(p)
-        p.set_defaults(_run=sub.run, _name=sub.name)
     return parser
 
 

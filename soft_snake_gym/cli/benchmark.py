@@ -8,11 +8,11 @@ import json
 import sys
 from pathlib import Path
 
+from soft_snake_gym import plots
 from soft_snake_gym.benchmark import (
     DEFAULT_NODES,
     DEFAULT_ROBOTS,
     format_report,
-    plot_benchmark,
     run_benchmark,
 )
 from soft_snake_gym.cli.common import CLIError
@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     json_path = Path(args.json)
     json_path.parent.mkdir(parents=True, exist_ok=True)
     json_path.write_text(json.dumps(res, indent=2))
-    png = plot_benchmark(res, args.png or json_path.with_suffix(".png"))
+    png = plots.benchmark_chart(res, args.png or json_path.with_suffix(".png"))
     print(report)
     print(f"\nwrote {json_path} and {png}")
     return 0

@@ -1,1 +1,2 @@
-"""Studies over many episodes: sweeps, the report, comparisons of policies, convergence in the time step."""
+"""Studies over many episodes: parameter sweeps, trajectory figures, the thesis reproduction report,
+comparisons of policies and convergence in the time step."""

@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from soft_snake_gym import plots
 from soft_snake_gym.agents import make_policy
 from soft_snake_gym.evaluation import evaluate, make_eval_env, metric_columns, summarize
 
@@ -52,31 +53,8 @@ def format_comparison(results: dict[str, dict[str, tuple[float, float]]], title:
 
 def plot_comparison(results: dict[str, dict[str, tuple[float, float]]], path: str | Path, title: str = "") -> Path:
     """Bar chart (mean with std error bars) of speed, cost of transport and return."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    names = list(results)
-    fig, axes = plt.subplots(1, len(CHART), figsize=(4.2 * len(CHART), 3.6))
     labels = {k: (label, unit) for k, label, unit in METRICS}
-    for ax, key in zip(axes, CHART, strict=True):
-        means = [results[n].get(key, (math.nan, 0))[0] for n in names]
-        stds = [results[n].get(key, (0, math.nan))[1] for n in names]
-        ax.bar(range(len(names)), means, yerr=stds, capsize=4, color=[f"C{i}" for i in range(len(names))])
-        ax.set_xticks(range(len(names)), names, rotation=20, ha="right")
-        label, unit = labels[key]
-        ax.set_ylabel(f"{label} [{unit}]")
-        ax.set_title(label)
-        ax.grid(axis="y", alpha=0.3)
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return plots.comparison_chart(results, [(k, *labels[k]) for k in CHART], path, title)
 
 
 def check_figure_path(path: str | Path) -> None:

@@ -5,7 +5,7 @@ load) and with the thesis gait, counts Newton iterations per step, then times ea
 the step on a representative state in a compiled loop (no Python dispatch), and the Python
 side of ``gym.make("SoftEel-v0").step`` with cProfile.
 
-    python benchmarks/profile_step.py
+    python scripts/profile_step.py
 """
 
 from __future__ import annotations

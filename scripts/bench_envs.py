@@ -12,8 +12,8 @@ action sources, resetting whenever an episode ends:
 For reference the bare ``Simulator.step`` rate under the same gait inputs is printed too;
 the difference is the env's overhead per step (observation, reward, info, wrappers).
 
-    python benchmarks/bench_envs.py                  # ~2 s per case
-    python benchmarks/bench_envs.py --seconds 5 --json bench_envs.json
+    python scripts/bench_envs.py                  # ~2 s per case
+    python scripts/bench_envs.py --seconds 5 --json bench_envs.json
 """
 
 from __future__ import annotations

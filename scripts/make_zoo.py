@@ -6,8 +6,8 @@ its own evaluation seeds, in its last stage) with its VecNormalize statistics an
 the package, plots the learning curves, and compares the shipped
 agents with the baselines on 10 seeds.
 
-    python training/make_zoo.py                 # everything (about an hour on 2 cores)
-    python training/make_zoo.py --skip-training # only copy, plot and compare existing runs
+    python scripts/make_zoo.py                 # everything (about an hour on 2 cores)
+    python scripts/make_zoo.py --skip-training # only copy, plot and compare existing runs
 """
 
 from __future__ import annotations
@@ -17,6 +17,8 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+from soft_snake_gym.training import plot_learning_curve
 
 ROOT = Path(__file__).resolve().parents[1]
 ZOO = ROOT / "soft_snake_gym" / "zoo"
@@ -50,8 +52,6 @@ def main() -> None:
     parser.add_argument("--runs", default="runs", help="folder of the run folders (default runs/)")
     parser.add_argument("--skip-training", action="store_true", help="use the existing run folders")
     args = parser.parse_args()
-    from soft_snake_gym.training import plot_learning_curve
-
     for env_id, stages in STAGES.items():
         run = Path(args.runs) / f"{env_id}_PPO_zoo"
         if not args.skip_training:

@@ -5,8 +5,8 @@ Two ways of driving the simulator are timed, both with the thesis gaits as input
 (``n`` = 10 steps in one compiled call, inputs refreshed every 10 steps). Runs on one core
 (``NUMBA_NUM_THREADS`` does not matter: the single-robot step is serial).
 
-    python benchmarks/bench_simulator.py            # all cases, ~1 s each
-    python benchmarks/bench_simulator.py --seconds 3 --json bench.json
+    python scripts/bench_simulator.py            # all cases, ~1 s each
+    python scripts/bench_simulator.py --seconds 3 --json bench.json
 """
 
 from __future__ import annotations

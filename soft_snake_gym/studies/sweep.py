@@ -23,23 +23,36 @@ drawn next to the CSV.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import math
+import multiprocessing as mp
 import os
-import sys
 import time
-from collections.abc import Iterable
+import warnings
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
-from soft_snake_gym.cli import CLIError, subcommand
+from soft_snake_gym import plots
+from soft_snake_gym.agents import make_policy
+from soft_snake_gym.envs import register_envs
+from soft_snake_gym.evaluation import evaluate, make_eval_env
+from soft_snake_gym.gaits import max_serpenoid_amplitude
 
-__all__ = ["STUDIES", "Study", "StudyGrid", "run_cell", "run_sweep", "read_results", "default_grid"]
+__all__ = [
+    "STUDIES",
+    "Study",
+    "StudyGrid",
+    "control_step",
+    "run_cell",
+    "run_sweep",
+    "read_results",
+    "default_grid",
+]
 
 SOFT_E_BEND = 1.87e4
 """Bending modulus of the sources' amplitude-frequency studies [Pa]."""
@@ -47,13 +60,16 @@ SOFT_E_BEND = 1.87e4
 SOFT_GAINS = {"Kp": 10.0, "Kd": 2.0, "Ki": 1.0}
 """PID gains the sources use at that softness (docs/model.md §9)."""
 
+ALPHA_MAX_FRACTION = 0.95
+"""The default largest amplitude, as a fraction of the serpenoid's self-intersection limit."""
+
 
 @dataclass(frozen=True)
 class StudyGrid:
     """Grid bounds and resolution; every field is a ``soft-snake sweep`` option."""
 
     alpha_min: float = 0.15
-    alpha_max: float | None = None  # None: 0.95 x the self-intersection limit
+    alpha_max: float | None = None  # None: ALPHA_MAX_FRACTION x the self-intersection limit
     n_alpha: int = 8
     omega_min: float = 0.5
     omega_max: float = math.pi
@@ -68,9 +84,8 @@ class StudyGrid:
     inch_transient: float = 1.0
 
     def alphas(self) -> np.ndarray:
-        from soft_snake_gym.gaits import max_serpenoid_amplitude
-
-        hi = 0.95 * max_serpenoid_amplitude(10, math.pi / 4) if self.alpha_max is None else self.alpha_max
+        hi = (ALPHA_MAX_FRACTION * max_serpenoid_amplitude(10, math.pi / 4) if self.alpha_max is None
+              else self.alpha_max)
         return np.round(np.linspace(self.alpha_min, hi, self.n_alpha), 4)
 
     def omegas(self) -> np.ndarray:
@@ -181,11 +196,23 @@ def cell_key(cell: dict[str, Any]) -> str:
     return "|".join(parts)
 
 
+def control_step(env_id: str, env_kwargs: dict[str, Any] | None = None) -> float:
+    """The control step ``dt`` [s] of ``env_id`` made with ``env_kwargs`` (its ``dt``, or the
+    integrator's step ``h``), read from the env itself; construction warnings are left to the
+    env that runs."""
+    register_envs()
+    kwargs = {k: v for k, v in (env_kwargs or {}).items() if k != "max_episode_steps"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        env = gym.make(env_id, **kwargs)
+    try:
+        return env.unwrapped.dt
+    finally:
+        env.close()
+
+
 def run_cell(cell: dict[str, Any], grid: StudyGrid | None = None) -> dict[str, Any]:
     """Run one grid cell (one episode) and return the cell with its metrics."""
-    from soft_snake_gym.evaluation import evaluate, make_eval_env
-    from soft_snake_gym.agents import make_policy
-
     grid = grid or StudyGrid()
     t0 = time.perf_counter()
     study = STUDIES[cell["study"]]
@@ -193,15 +220,14 @@ def run_cell(cell: dict[str, Any], grid: StudyGrid | None = None) -> dict[str, A
         alpha, omega = cell["alpha"], cell["omega"]
         period = 2 * math.pi / omega
         transient = grid.transient_cycles * period
-        steps = int(round((transient + grid.cycles * period) / 0.01))
         peak_rate = max(alpha * omega / math.cos(alpha / 2) ** 2, 1.5 * alpha * omega)
         env_kwargs = {
             "rod": {"E_bend": cell["E_bend"]},
             "initial_shape": "straight",
             "reset_noise_scale": 0.0,
             "max_curvature_rate": max(2 * math.pi, 1.05 * peak_rate),
-            "max_episode_steps": steps,
         }
+        seconds = transient + grid.cycles * period
         opts = {"alpha": alpha, "omega": omega}
         if cell["controller"] == "pid" and cell["E_bend"] <= 1e5:
             opts.update(SOFT_GAINS)
@@ -210,9 +236,10 @@ def run_cell(cell: dict[str, Any], grid: StudyGrid | None = None) -> dict[str, A
         env_kwargs = {
             "ground": {"mu_s": cell["mu_s"], "mu_d": cell["mu_d"]},
             "reset_noise_scale": 0.0,
-            "max_episode_steps": int(round(grid.inch_duration / 0.01)),
         }
+        seconds = grid.inch_duration
         opts = {}
+    env_kwargs["max_episode_steps"] = int(round(seconds / control_step(study.env_id, env_kwargs)))
     env = make_eval_env(study.env_id, seed=0, env_kwargs=env_kwargs)
     spec = cell["controller"] + (":" + ",".join(f"{k}={v!r}" for k, v in opts.items()) if opts else "")
     policy = make_policy(spec, env)
@@ -283,13 +310,16 @@ def run_sweep(
         workers: processes (default: the number of local cores); 1 runs in this process.
         progress: show a tqdm bar.
         figures: draw the heatmaps afterwards.
+
+    Raises:
+        ValueError: an unknown study or fewer than one worker.
     """
-    from tqdm.auto import tqdm
+    from tqdm.auto import tqdm  # here, not above: a fifth of a second to import
 
     if study_name not in STUDIES:
-        raise CLIError(f"unknown study {study_name!r}; choose one of {', '.join(STUDIES)} or 'all'")
+        raise ValueError(f"unknown study {study_name!r}; choose one of {', '.join(STUDIES)} or 'all'")
     if workers is not None and workers < 1:
-        raise CLIError(f"workers = {workers} must be at least 1 (or None: every local core)")
+        raise ValueError(f"workers = {workers} must be at least 1 (or None: every local core)")
     study = STUDIES[study_name]
     grid = grid or StudyGrid()
     out_dir = Path(out_dir)
@@ -326,8 +356,6 @@ def run_sweep(
                 write(_worker((cell, grid)))
                 bar.update()
         elif pending:
-            import multiprocessing as mp
-
             with ProcessPoolExecutor(
                 max_workers=min(workers, len(pending)), mp_context=mp.get_context("spawn")
             ) as pool:
@@ -343,11 +371,9 @@ def run_sweep(
         bar.close()
     pngs: list[Path] = []
     if figures:
-        from soft_snake_gym.figures import sweep_heatmaps
-
         results = read_results(path)
         rows = [results[cell_key(c)] for c in cells if cell_key(c) in results]
-        pngs = sweep_heatmaps(study, rows, out_dir)
+        pngs = plots.sweep_heatmaps(study, rows, out_dir)
     return {
         "csv": path,
         "computed": len(pending),
@@ -360,115 +386,3 @@ def run_sweep(
 def default_grid(**overrides: Any) -> StudyGrid:
     """A :class:`StudyGrid` with the given fields replaced."""
     return StudyGrid(**{k: v for k, v in overrides.items() if v is not None})
-
-
-# --- CLI ----------------------------------------------------------------------------------------
-def _grid_arguments(p: argparse.ArgumentParser) -> None:
-    g = StudyGrid()
-    p.add_argument("--alpha-min", type=float, help=f"smallest amplitude [rad] (default {g.alpha_min})")
-    p.add_argument(
-        "--alpha-max",
-        type=float,
-        help="largest amplitude [rad] (default 0.95 x the self-intersection limit, 1.52)",
-    )
-    p.add_argument("--n-alpha", type=int, help=f"amplitudes in the grid (default {g.n_alpha})")
-    p.add_argument("--omega-min", type=float, help=f"smallest frequency [rad/s] (default {g.omega_min})")
-    p.add_argument("--omega-max", type=float, help="largest frequency [rad/s] (default pi)")
-    p.add_argument("--n-omega", type=int, help=f"frequencies in the grid (default {g.n_omega})")
-    p.add_argument(
-        "--e-bend",
-        type=float,
-        nargs="+",
-        help=f"bending moduli of swim-stiffness [Pa] (default {' '.join(f'{e:g}' for e in g.e_bend)})",
-    )
-    p.add_argument(
-        "--mu-min", type=float, dest="mu_s_min", help=f"smallest friction coefficient (default {g.mu_s_min})"
-    )
-    p.add_argument(
-        "--mu-max", type=float, dest="mu_s_max", help=f"largest friction coefficient (default {g.mu_s_max})"
-    )
-    p.add_argument("--n-mu", type=int, help=f"friction coefficients per axis (default {g.n_mu})")
-    p.add_argument("--cycles", type=int, help=f"gait cycles averaged per swimming cell (default {g.cycles})")
-    p.add_argument(
-        "--inch-duration", type=float, help=f"inching episode length [s] (default {g.inch_duration})"
-    )
-
-
-def grid_from_args(args: argparse.Namespace) -> StudyGrid:
-    """The :class:`StudyGrid` of the grid options, validated."""
-    keys = (
-        "alpha_min",
-        "alpha_max",
-        "n_alpha",
-        "omega_min",
-        "omega_max",
-        "n_omega",
-        "mu_s_min",
-        "mu_s_max",
-        "n_mu",
-        "cycles",
-        "inch_duration",
-    )
-    kw = {k: getattr(args, k) for k in keys}
-    if args.e_bend:
-        kw["e_bend"] = tuple(args.e_bend)
-    grid = default_grid(**kw)
-    for k in ("n_alpha", "n_omega", "n_mu", "cycles"):
-        if getattr(grid, k) < 1:
-            raise CLIError(f"--{k.replace('_', '-')} {getattr(grid, k)} must be at least 1")
-    if grid.omega_min <= 0 or grid.omega_max < grid.omega_min:
-        raise CLIError(
-            f"frequencies need 0 < --omega-min <= --omega-max, got {grid.omega_min}, {grid.omega_max}"
-        )
-    if grid.alpha_min <= 0 or (grid.alpha_max is not None and grid.alpha_max < grid.alpha_min):
-        raise CLIError(
-            f"amplitudes need 0 < --alpha-min <= --alpha-max, got {grid.alpha_min}, {grid.alpha_max}"
-        )
-    if grid.mu_s_min < 0 or grid.mu_s_max < grid.mu_s_min:
-        raise CLIError(f"friction needs 0 <= --mu-min <= --mu-max, got {grid.mu_s_min}, {grid.mu_s_max}")
-    if any(e <= 0 for e in grid.e_bend):
-        raise CLIError(f"--e-bend values must be > 0 Pa, got {list(grid.e_bend)}")
-    top = grid.alphas()[-1]
-    if top >= math.pi:
-        raise CLIError(
-            f"--alpha-max {top:g} must be below pi rad (a serpenoid's amplitude; the body "
-            "self-intersects from about 1.6 rad)"
-        )
-    if grid.inch_duration <= 2 * grid.inch_transient:
-        raise CLIError(
-            f"--inch-duration {grid.inch_duration:g} must exceed twice the {grid.inch_transient:g} s "
-            "transient the metrics leave out"
-        )
-    return grid
-
-
-def _sweep_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("study", choices=[*STUDIES, "all"], help="which study (or all)")
-    p.add_argument("--out", default="sweeps", help="output folder for CSV and PNG (default sweeps/)")
-    p.add_argument("--workers", type=int, help="processes (default: all local cores)")
-    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    _grid_arguments(p)
-
-
-@subcommand("sweep", "run (or resume) the thesis's parameter studies: CSV + heatmaps", _sweep_arguments)
-def _sweep(args: argparse.Namespace) -> int:
-    grid = grid_from_args(args)
-    if args.workers is not None and args.workers < 1:
-        raise CLIError(f"--workers {args.workers} must be at least 1")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise CLIError(f"--out {args.out!r} is a file; give a folder for the CSV and heatmaps")
-    names: Iterable[str] = STUDIES if args.study == "all" else [args.study]
-    errors = 0
-    for name in names:
-        res = run_sweep(name, args.out, grid, workers=args.workers, progress=not args.no_progress)
-        print(
-            f"{name}: {res['computed']} cells computed, {res['skipped']} resumed from {res['csv']} "
-            f"in {res['seconds']:.1f} s; figures: {', '.join(str(p) for p in res['figures'])}"
-        )
-        bad = [r for r in read_results(res["csv"]).values() if str(r.get("failure", "")).startswith("error:")]
-        if bad:
-            errors += len(bad)
-            print(f"{name}: {len(bad)} cells could not run, e.g. {bad[0]['key']}: {bad[0]['failure']} "
-                  f"(failure column of {res['csv']})", file=sys.stderr)
-    return 1 if errors else 0

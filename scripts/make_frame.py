@@ -1,7 +1,7 @@
 """Render the README's frame of SoftEel-v0: docs/img/softeel_frame.png.
 
 The eel starts on the serpenoid and swims 2 s under the open-loop gait (docs/model.md §7), then
-one ``rgb_array`` frame is saved. Run from the repository root: ``python docs/make_frame.py``.
+one ``rgb_array`` frame is saved. Run from the repository root: ``python scripts/make_frame.py``.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
 
-OUT = Path(__file__).resolve().parent / "img" / "softeel_frame.png"
+OUT = Path(__file__).resolve().parents[1] / "docs" / "img" / "softeel_frame.png"
 
 
 def main(seconds: float = 2.0, alpha: float = math.pi / 4, omega: float = math.pi) -> Path:

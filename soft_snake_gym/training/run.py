@@ -1,0 +1,261 @@
+"""The run folder: what a run writes (config, command, meta), its checkpoints and how a run
+resumes; and the learning-curve figure drawn from it.
+
+A run folder holds everything needed to reproduce or continue a run::
+
+    runs/SoftEel-v0_PPO_s0/
+      config.yaml          the resolved configuration (run settings and hyperparameters)
+      command.txt          the exact command line
+      meta.json            package version, git commit, library versions, start time
+      tb/                  TensorBoard logs
+      progress.csv         SB3's training log
+      learning_curve.csv   agent and baseline evaluations on the same seeds
+      checkpoints/         periodic model and VecNormalize statistics (resume from the last)
+      best_model.zip       the best model by evaluation return (+ best_vecnormalize.pkl)
+      final_model.zip      the model at the end (+ vecnormalize.pkl)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import os
+import platform
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import numpy as np
+import yaml
+
+import soft_snake_gym
+from soft_snake_gym import plots
+from soft_snake_gym.agents import latest_checkpoint
+from soft_snake_gym.config import ConfigError, load_yaml
+from soft_snake_gym.training.config import TrainConfig, load_train_config
+
+__all__ = [
+    "NO_CHECKOUT",
+    "RUN_FILES",
+    "Terminated",
+    "plot_learning_curve",
+    "save_checkpoint",
+]
+
+@contextlib.contextmanager
+def _signals_held():
+    """Ctrl-C and SIGTERM wait until the block ends (a save is never cut in half); on
+    platforms without ``pthread_sigmask`` the block runs as is."""
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = {signal.SIGINT, signal.SIGTERM}
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)  # a held signal is delivered here
+
+
+def save_checkpoint(model, run_dir: Path, started: float | None = None) -> Path:
+    """Save the model and its VecNormalize statistics under ``checkpoints/``; with
+    ``started`` (the run's ``time.time()`` origin) also the wall time so far, so that a
+    resumed run's learning curve continues the clock (``checkpoints/wall_s.json``).
+
+    Each file is written under a temporary name and renamed, with Ctrl-C and SIGTERM held
+    meanwhile: an interrupt never leaves a half-written checkpoint for ``--resume`` to find.
+    """
+    ckdir = run_dir / "checkpoints"
+    ckdir.mkdir(parents=True, exist_ok=True)
+    steps = model.num_timesteps
+    path = ckdir / f"model_{steps}_steps.zip"
+    with _signals_held():
+        partial = ckdir / f"model_{steps}_steps.partial.zip"
+        model.save(partial)
+        vn = model.get_vec_normalize_env()
+        if vn is not None:
+            stats = ckdir / f"vecnormalize_{steps}_steps.pkl"
+            vn.save(str(stats.with_suffix(".partial")))
+            os.replace(stats.with_suffix(".partial"), stats)
+        os.replace(partial, path)
+        if started is not None:
+            walls = _checkpoint_walls(run_dir)
+            walls[str(steps)] = round(time.time() - started, 1)
+            (ckdir / "wall_s.json").write_text(json.dumps(walls, indent=1) + "\n")
+    return path
+
+
+def _checkpoint_walls(run_dir: Path) -> dict[str, float]:
+    """Training wall time [s] at each checkpoint, by step count."""
+    path = run_dir / "checkpoints" / "wall_s.json"
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+class Terminated(KeyboardInterrupt):
+    """Training stopped by SIGTERM (a scheduler or ``kill``): handled as Ctrl-C, a checkpoint
+    is saved first."""
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt():
+    """Within the block, SIGTERM raises :class:`Terminated` (once; a repeat is ignored while
+    the checkpoint is written). Outside the main thread, signals stay as they are."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise Terminated(f"stopped by signal {signal.Signals(signum).name}")
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+# --- the run --------------------------------------------------------------------------------
+NO_CHECKOUT = "none: the package is not a git checkout (an installed copy); see soft_snake_gym's version"
+
+
+def _git_commit(package_dir: Path | None = None) -> str:
+    """The commit of the git checkout the package runs from, or :data:`NO_CHECKOUT` when it
+    runs from an installed copy (``pip install .``) or git is missing. A checkout counts only
+    if it tracks the package itself, not merely encloses it (a venv inside another repo)."""
+    where = package_dir or Path(__file__).resolve().parents[1]
+    try:
+        tracked = subprocess.run(["git", "ls-files", "--error-unmatch", "__init__.py"], cwd=where,
+                                 capture_output=True, text=True, timeout=5)
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=where, capture_output=True, text=True,
+                              timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return NO_CHECKOUT
+    if tracked.returncode != 0 or head.returncode != 0 or not head.stdout.strip():
+        return NO_CHECKOUT
+    return head.stdout.strip()
+
+
+def _is_new_stage(cfg: TrainConfig, run_dir: Path) -> bool:
+    """True if ``cfg`` changes settings other than ``n_timesteps`` of the run's config.yaml."""
+    path = run_dir / "config.yaml"
+
+    def settings(data: dict[str, Any]) -> dict[str, Any]:
+        return {k: v for k, v in next(iter(data.values())).items() if k != "n_timesteps"}
+
+    return path.is_file() and settings(load_yaml(path)) != settings(cfg.to_yaml_dict())
+
+
+def _record_resume(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> bool:
+    """Append the resuming command to command.txt. If settings other than ``n_timesteps``
+    changed (a curriculum: ``--resume DIR --hyperparams ...``), keep the earlier config.yaml
+    as config.<k>.yaml and return True: a new stage begins."""
+    path = run_dir / "config.yaml"
+    new_stage = _is_new_stage(cfg, run_dir)
+    if new_stage:
+        k = 1
+        while (run_dir / f"config.{k}.yaml").exists():
+            k += 1
+        path.rename(run_dir / f"config.{k}.yaml")
+    path.write_text(yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False))
+    with open(run_dir / "command.txt", "a") as fh:
+        fh.write(shlex.join(command if command is not None else sys.argv) + "\n")
+    return new_stage
+
+
+#: The files a run writes: a folder holding only these and no checkpoint may be reused.
+RUN_FILES = ("config.yaml", "command.txt", "meta.json", "tb", "progress.csv", "learning_curve.csv",
+             "learning_curve.png", "checkpoints", "best_model.zip", "best_vecnormalize.pkl",
+             "final_model.zip", "vecnormalize.pkl")
+
+
+def _check_new_run_dir(run_dir: Path) -> None:
+    """A new run may start in a missing or empty folder, or in a folder of a run that left no
+    checkpoint (it failed or was stopped before its first one)."""
+    if not run_dir.exists():
+        return
+    if not run_dir.is_dir():
+        raise ConfigError(f"run folder {str(run_dir)!r} is a file; choose another --run-dir")
+    if latest_checkpoint(run_dir) is not None:
+        raise ConfigError(
+            f"run folder {str(run_dir)!r} already holds a run with checkpoints; "
+            "pass --resume to continue it or choose another --run-dir"
+        )
+    other = sorted(p.name for p in run_dir.iterdir()
+                   if p.name not in RUN_FILES and not (p.name.startswith(("config.", "progress."))))
+    if other:
+        raise ConfigError(
+            f"run folder {str(run_dir)!r} is not empty and not a run folder (it holds {', '.join(other[:3])}"
+            f"{', ...' if len(other) > 3 else ''}); choose another --run-dir"
+        )
+
+
+def _clear_run_files(run_dir: Path) -> None:
+    """Remove what an earlier run without checkpoints left, so the logs do not mix runs."""
+    if not run_dir.is_dir():
+        return
+    for p in run_dir.iterdir():
+        if p.name in RUN_FILES or p.name.startswith(("config.", "progress.")):
+            shutil.rmtree(p) if p.is_dir() else p.unlink()
+
+
+def _write_run_files(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> None:
+    import stable_baselines3  # here, not above: SB3 and torch take seconds to import
+    import torch
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.yaml").write_text(yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False))
+    (run_dir / "command.txt").write_text(shlex.join(command if command is not None else sys.argv) + "\n")
+    meta = {
+        "soft_snake_gym": soft_snake_gym.__version__,
+        "git_commit": _git_commit(),
+        "python": platform.python_version(),
+        "stable_baselines3": stable_baselines3.__version__,
+        "torch": torch.__version__,
+        "gymnasium": gymnasium.__version__,
+        "numpy": np.__version__,
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+    (run_dir / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
+
+
+def _make_logger(run_dir: Path):
+    """SB3's logger writing progress.csv into the run folder and TensorBoard into tb/; a
+    resumed run moves the earlier progress.csv aside (progress.1.csv, ...) instead of
+    overwriting it."""
+    # here, not above: SB3 and torch take seconds to import
+    from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoardOutputFormat
+
+    csv_path = run_dir / "progress.csv"
+    if csv_path.is_file():
+        k = 1
+        while (run_dir / f"progress.{k}.csv").exists():
+            k += 1
+        csv_path.rename(run_dir / f"progress.{k}.csv")
+    return Logger(str(run_dir), [CSVOutputFormat(str(csv_path)), TensorBoardOutputFormat(str(run_dir / "tb"))])
+
+
+
+def plot_learning_curve(run_dir: str | Path, out: str | Path | None = None) -> Path:
+    """Plot a run's learning_curve.csv (:func:`soft_snake_gym.plots.learning_curve`), written
+    next to the CSV by default.
+
+    Raises:
+        ConfigError: the CSV has no evaluations yet.
+    """
+    run_dir = Path(run_dir)
+    with open(run_dir / "learning_curve.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    if not rows:
+        raise ConfigError(f"{run_dir / 'learning_curve.csv'} has no evaluations yet")
+    cfg = load_train_config(next(iter(load_yaml(run_dir / "config.yaml"))), path=run_dir / "config.yaml")
+    out = Path(out) if out is not None else run_dir / "learning_curve.png"
+    return plots.learning_curve(rows, cfg, out)

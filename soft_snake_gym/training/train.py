@@ -1,0 +1,132 @@
+"""``train()``: one Stable-Baselines3 run (PPO or SAC) in a run folder, new or resumed."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from soft_snake_gym.config import ConfigError
+from soft_snake_gym.training.callbacks import make_callbacks
+from soft_snake_gym.training.config import TrainConfig, _algo_class, check_env_id, planned_steps
+from soft_snake_gym.training.run import (
+    _check_new_run_dir,
+    _checkpoint_walls,
+    _clear_run_files,
+    _is_new_stage,
+    _make_logger,
+    _record_resume,
+    _sigterm_as_interrupt,
+    _write_run_files,
+    latest_checkpoint,
+    save_checkpoint,
+)
+
+__all__ = ["make_train_env", "train"]
+
+
+def make_train_env(cfg: TrainConfig, seed: int):
+    """The vectorized training env (Monitor-wrapped, seeded ``seed, seed + 1, ...``)."""
+    # here, not above: SB3 and torch take seconds to import (soft_snake_gym.sb3 imports SB3)
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    if cfg.vec_env == "batched":
+        from soft_snake_gym.sb3 import SoftVecEnv
+
+        return SoftVecEnv(cfg.env_id, n_envs=cfg.n_envs, seed=seed, **dict(cfg.env_kwargs))
+    cls = SubprocVecEnv if cfg.vec_env == "subproc" else DummyVecEnv
+    return make_vec_env(cfg.env_id, n_envs=cfg.n_envs, seed=seed, env_kwargs=dict(cfg.env_kwargs),
+                        vec_env_cls=cls)
+
+
+def _policy_kwargs(cfg: TrainConfig) -> dict[str, Any]:
+    import torch.nn as nn  # here, not above: torch takes seconds to import
+
+    kwargs = dict(cfg.policy_kwargs)
+    act = kwargs.pop("activation_fn", None)
+    if act is not None:
+        kwargs["activation_fn"] = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU,
+                                   "leaky_relu": nn.LeakyReLU}[act]
+    if "net_arch" in kwargs and isinstance(kwargs["net_arch"], dict):
+        kwargs["net_arch"] = {k: list(v) for k, v in kwargs["net_arch"].items()}
+    return kwargs
+
+
+def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress: bool = True,
+          command: list[str] | None = None) -> Path:
+    """Train (or, with ``resume``, continue) a run in ``run_dir``; returns the final model path.
+
+    Everything is checked (env keywords, hyperparameters, the baseline, the folder) before the
+    run folder is written. A new run may use a missing or empty folder, or one whose earlier
+    run left no checkpoint. Training stops at :func:`planned_steps` (the total rounded up to
+    whole rollouts). An interrupt (Ctrl-C, or SIGTERM from a scheduler or ``kill``) saves a
+    checkpoint before the exception propagates (:class:`Terminated` for SIGTERM); a killed
+    run resumes from its last periodic checkpoint.
+
+    Raises:
+        ConfigError: an unknown env id, a resume folder without a checkpoint, a folder that
+            holds another run, a config that SB3 or the env rejects.
+    """
+    import torch  # here, not above: SB3 and torch take seconds to import
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    check_env_id(cfg.env_id)
+    run_dir = Path(run_dir)
+    started = time.time()
+    torch.set_num_threads(1)  # small MLPs: threads cost more than they give on 2 cores
+    algo = _algo_class(cfg.algo)
+    if resume:
+        found = latest_checkpoint(run_dir) if run_dir.is_dir() else None
+        if found is None:
+            raise ConfigError(
+                f"cannot resume {str(run_dir)!r}: it has no checkpoint (checkpoints/model_*_steps.zip); "
+                "start a new run without --resume (the same --run-dir may be reused)"
+            )
+        model_path, stats_path = found
+        if cfg.normalize and stats_path is None:
+            raise ConfigError(f"checkpoint {model_path.name} has no VecNormalize statistics beside it")
+        steps = int(model_path.stem.split("_")[1])
+        started -= _checkpoint_walls(run_dir).get(str(steps), 0.0)  # the clock continues
+        env = make_train_env(cfg, seed=cfg.seed + 7919 * (1 + steps))
+        if cfg.normalize:
+            env = VecNormalize.load(str(stats_path), env)
+        model = algo.load(model_path, env=env, device="cpu")
+    else:
+        _check_new_run_dir(run_dir)
+        env = make_train_env(cfg, seed=cfg.seed)
+        if cfg.normalize:
+            env = VecNormalize(env, gamma=cfg.hyperparams.get("gamma", 0.99))
+        try:
+            model = algo(cfg.policy, env, policy_kwargs=_policy_kwargs(cfg), seed=cfg.seed, device="cpu",
+                         verbose=0, **cfg.hyperparams)
+        except (TypeError, ValueError, AssertionError) as err:
+            env.close()
+            raise ConfigError(f"{cfg.algo} rejected the configuration: {err}") from None
+    try:
+        stage_start = model.num_timesteps if resume and _is_new_stage(cfg, run_dir) else 0
+        callbacks = make_callbacks(cfg, run_dir, started, stage_start)  # checks the baseline
+        if resume:  # every check passed: now the folder is written
+            _record_resume(cfg, run_dir, command)
+        else:
+            _clear_run_files(run_dir)
+            _write_run_files(cfg, run_dir, command)
+        model.set_logger(_make_logger(run_dir))
+        steps = planned_steps(cfg, model.num_timesteps) - model.num_timesteps
+        with _sigterm_as_interrupt():
+            try:
+                if steps > 0:
+                    model.learn(steps, callback=callbacks, reset_num_timesteps=not resume,
+                                progress_bar=progress)
+            except KeyboardInterrupt:
+                save_checkpoint(model, run_dir, started)
+                raise
+    finally:
+        env.close()
+    final = run_dir / "final_model.zip"
+    model.save(final)
+    vn = model.get_vec_normalize_env()
+    if vn is not None:
+        vn.save(str(run_dir / "vecnormalize.pkl"))
+    save_checkpoint(model, run_dir, started)
+    return final
