@@ -383,10 +383,9 @@ class SoftRobotEnv(gym.Env):
         info["newton_iterations"] = newton_iterations
         return info
 
-    def _own_state_info(self) -> dict[str, Any]:
+    def _own_state_info(self, r: list[float]) -> dict[str, Any]:
         sim = self.sim
-        return self.state_info(self.task.rs.tolist(), sim.time, getattr(sim, self.shape_key),
-                               sim.newton_iterations, self.task.raw)
+        return self.state_info(r, sim.time, getattr(sim, self.shape_key), sim.newton_iterations, self.task.raw)
 
     def _check_options(self, body: dict[str, np.ndarray]) -> None:
         """Reject an initial body from ``reset(options=...)`` that violates the env's bounds."""
@@ -434,11 +433,11 @@ class SoftRobotEnv(gym.Env):
 
         self._failure = None
         self._needs_reset = False
-        T.robot_reset(self.sim.arrays, self.task)
+        T.robot_reset(tuple(self.sim.arrays), tuple(self.task))  # plain tuples: see physics.layout
         self._trail_com.clear()
         self._trail_head.clear()
         self._record_trail()
-        info = self._own_state_info()
+        info = self._own_state_info(self.task.rs.tolist())
         self._last_state_info = info.copy()
         info["randomized"] = dict(self.randomized)
         info["failure"] = None
@@ -477,7 +476,7 @@ class SoftRobotEnv(gym.Env):
             act[:] = action
         else:
             act[:] = self._check_action(action)
-        status = T.robot_step(self.sim.arrays, task)
+        status = T.robot_step(tuple(self.sim.arrays), tuple(task))  # plain tuples: see physics.layout
         if status == T.BAD_ACTION:
             a = np.asarray(action, dtype=np.float64)
             bad = np.flatnonzero(~np.isfinite(a)).tolist()
@@ -488,7 +487,7 @@ class SoftRobotEnv(gym.Env):
         ok = status == OK
         r = task.rs.tolist()
         if ok:
-            info = self._own_state_info()
+            info = self._own_state_info(r)
             self._last_state_info = info.copy()
         else:  # the last valid state, in new arrays (returned data must not be shared)
             self.fail(STATUS_REASONS[status])

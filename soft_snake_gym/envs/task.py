@@ -7,7 +7,8 @@ the same :func:`robot_step` over robots, so a robot's results are bitwise the sa
 Resets stay in Python (seeded noise, randomization draws) and end with :func:`robot_reset`.
 
 Per robot, the kernels take the simulator's :class:`~soft_snake_gym.physics.SimArrays` and the
-task's :class:`TaskArrays` (both stacked on a leading robot axis for :func:`batch_step`).
+task's :class:`TaskArrays` (both stacked on a leading robot axis for :func:`batch_step`); Python
+passes them as plain tuples, which the kernels name on entry (see :mod:`soft_snake_gym.physics.layout`).
 Inside the kernels the task's scalars sit at named indices (``T_*`` in ``tp``, ``R_*`` and
 ``M_*`` in ``rs``), as the simulator's do; Python reads them by name through
 :func:`reward_terms` and :func:`episode_metrics`.
@@ -16,15 +17,14 @@ Inside the kernels the task's scalars sit at named indices (``T_*`` in ``tp``, `
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
 from soft_snake_gym.envs import observe
+from soft_snake_gym.physics import banded, forces, geometry, stepper
 from soft_snake_gym.physics import layout as L
-from soft_snake_gym.physics import stepper
 from soft_snake_gym.physics.cache import drop_stale_cache
 from soft_snake_gym.physics.layout import SimArrays
 
@@ -41,10 +41,8 @@ __all__ = [
     "TERM_KEYS",
 ]
 
-# the cached kernels embed the code of every physics kernel they call
-drop_stale_cache(
-    __file__, [str(f) for f in sorted(Path(L.__file__).parent.glob("*.py"))] + [observe.__file__]
-)
+# the cached kernels embed the code of every kernel they call
+drop_stale_cache(__file__, [m.__file__ for m in (banded, forces, geometry, L, stepper, observe)])
 
 # --- task constants tp ------------------------------------------------------------------------
 SWIM, INCH = 0, 1
@@ -181,6 +179,7 @@ def robot_reset(s, t):
     """After the simulator's reset of ``s`` (:class:`~soft_snake_gym.physics.SimArrays`): the
     episode of ``t`` (:class:`TaskArrays`) starts here (centre of mass, zero powers and rewards,
     metrics, observation)."""
+    s, t = SimArrays(*s), TaskArrays(*t)
     rs = t.rs
     rs[:] = 0.0
     x, y = _com(s.q, t.w)
@@ -202,6 +201,7 @@ def robot_step(s, t):
     steps; on success updates the centre of mass, powers, observation and metrics. On a failure
     they keep their last valid values. The reward terms and the reward are written either way.
     """
+    s, t = SimArrays(*s), TaskArrays(*t)
     q, kbar, lbar, prm, out = s.q, s.kbar, s.lbar, s.prm, s.out
     act, tp, rs, uk, ul, w = t.act, t.tp, t.rs, t.uk, t.ul, t.w
     dt = tp[T_DT]
@@ -265,6 +265,7 @@ def batch_step(active, s, t, status):
     """:func:`robot_step` for every robot ``i`` with ``active[i]``, of stacked simulator arrays
     ``s`` and task arrays ``t`` (leading robot axis), spread over numba's threads; robot ``i``'s
     status into ``status[i]``."""
+    s, t = SimArrays(*s), TaskArrays(*t)
     for i in prange(status.size):
         if active[i]:
             si, ti = _robot(s, t, i)
@@ -274,6 +275,7 @@ def batch_step(active, s, t, status):
 @njit(cache=True, error_model="numpy")
 def batch_step_serial(active, s, t, status):
     """:func:`batch_step` on the calling thread alone (no thread-pool launch: for one thread)."""
+    s, t = SimArrays(*s), TaskArrays(*t)
     for i in range(status.size):
         if active[i]:
             si, ti = _robot(s, t, i)

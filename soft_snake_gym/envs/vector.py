@@ -303,10 +303,10 @@ class SoftVectorEnv(VectorEnv):
         status[:] = OK
         start = time.perf_counter()
         if self.num_threads == 1:
-            T.batch_step_serial(stepping, self.batch.sim, self.batch.task, status)
+            T.batch_step_serial(stepping, tuple(self.batch.sim), tuple(self.batch.task), status)
         else:
             numba.set_num_threads(self.num_threads)
-            T.batch_step(stepping, self.batch.sim, self.batch.task, status)
+            T.batch_step(stepping, tuple(self.batch.sim), tuple(self.batch.task), status)
         self.kernel_seconds += time.perf_counter() - start
         terminated = status != OK
         if terminated.any():

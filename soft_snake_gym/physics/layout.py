@@ -9,6 +9,10 @@ Parameters travel in one float64 vector ``prm`` (indices ``P_*``), per-robot scr
 ``buf`` (rows ``B_*``, each 2N long), integer scratch in ``ibuf`` (rows ``I_*``) and step
 diagnostics in ``out`` (indices ``O_*``). :class:`SimArrays` names the nine arrays of one robot
 (or, with a leading axis, of a batch); the kernels take it as one argument.
+
+Calls from Python pass ``tuple(arrays)`` and the kernel turns it back into ``SimArrays`` on
+entry (``SimArrays(*s)``, free in compiled code): numba's dispatcher types a plain tuple of
+arrays in C but a NamedTuple in Python, about 5 µs more per call, a fifth of a robot step.
 """
 
 from __future__ import annotations

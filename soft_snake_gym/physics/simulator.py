@@ -165,9 +165,10 @@ class Simulator:
         if arrays is None:
             arrays = allocate_arrays(N)
         elif not isinstance(arrays, SimArrays) or arrays.q.shape != (2 * N,):
+            got = f"SimArrays with q of shape {arrays.q.shape}" if isinstance(arrays, SimArrays) else type(arrays).__name__
             raise ValueError(
-                f"arrays must be the SimArrays of one robot of N = {N} nodes "
-                "(allocate_arrays(N), or .row(i) of a batch's)"
+                f"arrays is {got}: need the SimArrays of one robot of N = {N} nodes, q of shape "
+                f"({2 * N},) (allocate_arrays({N}), or .row(i) of a batch's)"
             )
         self.arrays = arrays
         """The kernels' arrays (:class:`~soft_snake_gym.physics.layout.SimArrays`): the state
@@ -251,7 +252,7 @@ class Simulator:
         self.failure = None
         # the energy ledger starts here: energies now, work and dissipation accumulated so far
         out = self.arrays.out
-        stepper.ledger_energies(self.arrays)
+        stepper.ledger_energies(tuple(self.arrays))
         out[L.O_L0_KIN : L.O_L0_E_FRICTION + 1] = out[
             [L.O_E_KIN, L.O_E_ELASTIC, L.O_T_FLUID, L.O_W_ACT, L.O_E_FLUID, L.O_E_DAMP, L.O_E_FRICTION]
         ]
@@ -297,7 +298,7 @@ class Simulator:
                 "call reset() or set_state() before stepping again"
             )
         uk, ul = self._inputs(u_k, u_l)
-        status = stepper.simulate(self.arrays, uk, ul, n_steps)
+        status = stepper.simulate(tuple(self.arrays), uk, ul, n_steps)  # a plain tuple: see layout
         if status != L.OK:
             self.failure = L.STATUS_REASONS[status]
             return False

@@ -94,6 +94,7 @@ from soft_snake_gym.physics.layout import (
     SELF_INTERSECTION,
     SLIDING,
     STUCK,
+    SimArrays,
 )
 
 # the cached kernels embed the code of the kernels they call from these files
@@ -357,7 +358,9 @@ def _symplectic_substep(s, dt, medium):
 def ledger_energies(s):
     """Write the body's kinetic and elastic energy and the water's ``T_f`` (0 out of water)
     into ``out[O_E_KIN]``, ``out[O_E_ELASTIC]``, ``out[O_T_FLUID]`` [J], and the energy ledger
-    since the start recorded at ``O_L0_*`` into ``out[O_LEDGER:]`` (``LEDGER_KEYS``)."""
+    since the start recorded at ``O_L0_*`` into ``out[O_LEDGER:]`` (``LEDGER_KEYS``); ``s`` is
+    :class:`~soft_snake_gym.physics.layout.SimArrays` or the plain tuple of its arrays."""
+    s = SimArrays(*s)
     q, v, kbar, lbar, prm, buf, out = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.out
     m = buf[B_M]
     ke = 0.0
@@ -386,8 +389,9 @@ def simulate(s, u_k, u_l, n_steps):
     the chosen integrator, then the state is checked.
 
     Args:
-        s: the robot's :class:`~soft_snake_gym.physics.layout.SimArrays`, advanced in place;
-            diagnostics go into ``s.out`` (the energies of :func:`ledger_energies` once, at the end).
+        s: the robot's :class:`~soft_snake_gym.physics.layout.SimArrays` (or, from Python, the
+            plain tuple of its arrays: see ``layout``), advanced in place; diagnostics go into
+            ``s.out`` (the energies of :func:`ledger_energies` once, at the end).
         u_k: curvature rates, (N-2,) [1/s].
         u_l: rest-length rates, (N-1,) [m/s].
         n_steps: steps of ``h``.
@@ -395,6 +399,7 @@ def simulate(s, u_k, u_l, n_steps):
     Returns:
         The status code (``OK`` = 0).
     """
+    s = SimArrays(*s)
     q, v, kbar, lbar, prm, buf, ibuf, out = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.ibuf, s.out
     h = prm[P_H]
     nsub = int(prm[P_SUBSTEPS])
