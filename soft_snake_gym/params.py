@@ -13,7 +13,8 @@ import numbers
 from dataclasses import InitVar, dataclass, fields
 from typing import Any, Literal
 
-__all__ = ["Rod", "Fluid", "Ground", "Integrator", "SimConfig", "Medium", "check_number", "plain_number"]
+__all__ = ["Rod", "Fluid", "Ground", "Integrator", "SimConfig", "Medium", "check_int", "check_number",
+           "plain_number"]
 
 Medium = Literal["water", "ground", "none"]
 
@@ -64,13 +65,21 @@ def _check(owner: object, name: str, lo: float | None = None, hi: float | None =
         object.__setattr__(owner, name, number)
 
 
-def _check_int(owner: object, name: str, lo: int, hi: int | None = None) -> None:
-    value = getattr(owner, name)
-    cls = type(owner).__name__
-    allowed = f"[{lo}, {'inf' if hi is None else hi}]"
+def check_int(where: str, value: Any, lo: int, hi: int | None = None, hint: str = "") -> int:
+    """:func:`check_number` for integers: ``value`` as a Python ``int`` if it is an integer
+    (Python or numpy, not a bool) in [lo, hi], else ``ValueError`` naming ``where``, the value,
+    the allowed range and, if given, ``hint`` (what the number means or what else is allowed)."""
     number = plain_number(value, integer=True)
     if number is None or number < lo or (hi is not None and number > hi):
-        raise ValueError(f"{cls}.{name} = {value!r} must be an integer in {allowed}")
+        allowed = f"[{lo}, {'inf' if hi is None else hi}]"
+        raise ValueError(f"{where} = {value!r} must be an integer in {allowed}" + (f" ({hint})" if hint else ""))
+    return number
+
+
+def _check_int(owner: object, name: str, lo: int, hi: int | None = None) -> None:
+    """:func:`check_int` on the field ``owner.name``; a numpy integer becomes a Python int."""
+    value = getattr(owner, name)
+    number = check_int(f"{type(owner).__name__}.{name}", value, lo, hi)
     if type(number) is not type(value):  # a numpy integer: keep the Python int
         object.__setattr__(owner, name, number)
 

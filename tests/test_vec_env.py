@@ -179,9 +179,9 @@ def test_reset_accepts_one_seed_per_robot_and_options():
 
 
 def test_bad_arguments_are_explained():
-    with pytest.raises(ValueError, match=r"num_envs = 0: need an integer >= 1"):
+    with pytest.raises(ValueError, match=r"num_envs = 0 must be an integer in \[1, inf\] \(the number of robots\)"):
         SoftVectorEnv("SoftEel-v0", 0)
-    with pytest.raises(ValueError, match=r"num_threads = 0: need an integer in \[1, "):
+    with pytest.raises(ValueError, match=r"num_threads = 0 must be an integer in \[1, "):
         SoftVectorEnv("SoftEel-v0", 2, num_threads=0)
     with pytest.raises(ValueError, match=r"num_threads = 99"):
         SoftVectorEnv("SoftEel-v0", 2, num_threads=99)

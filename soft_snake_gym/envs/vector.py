@@ -33,7 +33,7 @@ from soft_snake_gym.envs.inch import InchEnv
 from soft_snake_gym.envs.registration import MAX_EPISODE_STEPS
 from soft_snake_gym.envs.swim import SwimEnv
 from soft_snake_gym.envs.task import TaskArrays
-from soft_snake_gym.params import SimConfig
+from soft_snake_gym.params import SimConfig, check_int
 from soft_snake_gym.physics import SimArrays, Simulator, allocate_arrays
 from soft_snake_gym.physics.layout import (
     LEDGER_KEYS,
@@ -73,12 +73,6 @@ class RobotBatch:
     def time(self) -> np.ndarray:
         """Simulated time of each robot, as :attr:`Simulator.time`, (n,) [s]."""
         return self.sim.out[:, O_NSTEPS] * self.sim.prm[:, P_H]
-
-
-def _positive_int(name: str, value: Any, hint: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"{name} = {value!r}: need an integer >= 1 ({hint})")
-    return int(value)
 
 
 class SoftVectorEnv(VectorEnv):
@@ -134,19 +128,14 @@ class SoftVectorEnv(VectorEnv):
             raise ValueError(f"env_id = {env_id!r} has no batched version; use one of {list(ENV_CLASSES)}")
         self.env_id = env_id
         env_cls = ENV_CLASSES[env_id]
-        n = _positive_int("num_envs", num_envs, "the number of robots")
+        n = check_int("num_envs", num_envs, 1, hint="the number of robots")
         if max_episode_steps is not None:
-            max_episode_steps = _positive_int("max_episode_steps", max_episode_steps,
-                                              "or None for no time limit")
+            max_episode_steps = check_int("max_episode_steps", max_episode_steps, 1,
+                                          hint="or None for no time limit")
         max_threads = numba.config.NUMBA_NUM_THREADS
-        if num_threads is not None and (
-            isinstance(num_threads, bool) or not isinstance(num_threads, (int, np.integer))
-            or not 1 <= num_threads <= max_threads
-        ):
-            raise ValueError(
-                f"num_threads = {num_threads!r}: need an integer in [1, {max_threads}] "
-                f"(NUMBA_NUM_THREADS = {max_threads}), or None for all"
-            )
+        if num_threads is not None:
+            num_threads = check_int("num_threads", num_threads, 1, max_threads,
+                                    hint=f"NUMBA_NUM_THREADS = {max_threads}; or None for the default")
         try:
             mode = AutoresetMode(autoreset_mode)
         except ValueError:
