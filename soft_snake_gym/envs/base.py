@@ -268,7 +268,7 @@ class SoftRobotEnv(gym.Env):
             )
 
     @classmethod
-    def _over_arrays(cls, settings: BaseSettings, sim: Simulator, task: TaskArrays | None):
+    def over_arrays(cls, settings: BaseSettings, sim: Simulator, task: TaskArrays | None):
         """An env (no rendering) over a given simulator and task arrays, e.g. views of a batch's
         stacked arrays: how the vector env keeps one env object per robot."""
         env = cls.__new__(cls)

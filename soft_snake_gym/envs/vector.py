@@ -163,12 +163,12 @@ class SoftVectorEnv(VectorEnv):
         self.num_threads = int(num_threads)
         sim_arrays = allocate_arrays(base_config.rod.N, (n,))
         sims = tuple(Simulator(base_config, arrays=sim_arrays.row(i)) for i in range(n))
-        proto = env_cls._over_arrays(settings, sims[0], None)
+        proto = env_cls.over_arrays(settings, sims[0], None)
         n_act, n_obs = proto.action_space.shape[0], proto.observation_space.shape[0]
         self.batch = RobotBatch(sim=sim_arrays, task=T.allocate_task(proto.N, n_act, n_obs, (n,)), sims=sims)
         """The robots' stacked arrays (:class:`RobotBatch`); read-only for users."""
         self.envs: list[SoftRobotEnv] = [
-            env_cls._over_arrays(settings, sim, self.batch.task.row(i)) for i, sim in enumerate(sims)
+            env_cls.over_arrays(settings, sim, self.batch.task.row(i)) for i, sim in enumerate(sims)
         ]
         self.settings = settings
         self.N = proto.N
