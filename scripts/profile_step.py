@@ -24,15 +24,15 @@ import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.envs import observe
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-from soft_snake_gym.physics import banded
-from soft_snake_gym.physics import kernels as K
+from soft_snake_gym.physics import banded, forces, layout, stepper
+from soft_snake_gym.physics.layout import SimArrays
 
 
 @njit
-def _loop_residual(k, q, v, kbar, lbar, prm, buf, J, ibuf, jac):
+def _loop_residual(k, sa, jac):
     s = 0.0
     for _ in range(k):
-        s += K._be_residual(q, v, kbar, lbar, prm, buf, J, ibuf, 0.01, K.MEDIUM_WATER, jac)[0]
+        s += stepper._be_residual(sa, 0.01, layout.MEDIUM_WATER, jac)[0]
     return s
 
 
@@ -56,7 +56,7 @@ def _loop_copy(k, J, Jw, b, bw):
 def _loop_check(k, q, v, kbar, lbar, uk, ul, prm, buf, ibuf):
     s = 0.0
     for _ in range(k):
-        s += K.check_state(q, v, lbar, prm, buf, ibuf) + K.actuator_power(q, kbar, lbar, uk, ul, prm)
+        s += stepper.check_state(q, v, lbar, prm, buf, ibuf) + forces.actuator_power(q, kbar, lbar, uk, ul, prm)
     return s
 
 
@@ -69,10 +69,10 @@ def _loop_observe(k, q, v, kbar, w, low, high, raw, obs):
 
 
 @njit
-def _loop_step(k, act, A, q, v, kbar, lbar, prm, buf, J, ibuf, out, uk, ul, w, tp, low, high, raw, obs, rs):
+def _loop_step(k, A, sa, ta):
     for s in range(k):
-        act[:] = A[s % A.shape[0]]
-        T.robot_step(act, q, v, kbar, lbar, prm, buf, J, ibuf, out, uk, ul, w, tp, low, high, raw, obs, rs)
+        ta.act[:] = A[s % A.shape[0]]
+        T.robot_step(sa, ta)
 
 
 def _us(fn, *args, k=20000) -> float:
@@ -109,26 +109,24 @@ def main() -> None:
     for a in rng.uniform(-1, 1, (30, 8)).astype(np.float32):
         env.step(a)
     u = env.unwrapped
-    q, v, kbar, lbar, prm, buf, J, ibuf, out = (a.copy() for a in u._phys)
-    _loop_residual(1, q, v, kbar, lbar, prm, buf, J, ibuf, True)  # a Jacobian to factor
-    piv = ibuf[K.I_PIV].copy()
+    sa = SimArrays(*(a.copy() for a in u.sim.arrays))
+    q, v, kbar, lbar, prm, buf, J, ibuf, out = sa
+    _loop_residual(1, sa, True)  # a Jacobian to factor
+    piv = ibuf[layout.I_PIV].copy()
     Jw, b, bw = np.empty_like(J), np.ones(q.size), np.empty(q.size)
     A = rng.uniform(-1, 1, (64, 8))
     parts = {
-        "whole robot_step (random actions)": _us(_loop_step, u._act.copy(), A, q.copy(), v.copy(), kbar.copy(),
-                                                 lbar.copy(), prm, buf.copy(), J.copy(), ibuf.copy(), out.copy(),
-                                                 u._uk.copy(), u._ul.copy(), u._w, u._tp.copy(), u._obs_low,
-                                                 u._obs_high, u._obs_raw.copy(), u._obs.copy(), u._rs.copy(), k=5000),
-        "residual + Jacobian (assemble, drag, added mass)": _us(_loop_residual, q.copy(), v.copy(), kbar, lbar,
-                                                                prm, buf.copy(), J.copy(), ibuf.copy(), True),
-        "residual only (line-search trial)": _us(_loop_residual, q.copy(), v.copy(), kbar, lbar, prm, buf.copy(),
-                                                 J.copy(), ibuf.copy(), False),
+        "whole robot_step (random actions)": _us(_loop_step, A, SimArrays(*(a.copy() for a in sa)),
+                                                 type(u.task)(*(a.copy() for a in u.task)), k=5000),
+        "residual + Jacobian (assemble, drag, added mass)": _us(_loop_residual, SimArrays(*(a.copy() for a in sa)),
+                                                                True),
+        "residual only (line-search trial)": _us(_loop_residual, SimArrays(*(a.copy() for a in sa)), False),
         "banded LU + solve (2N = 20, KL = KU = 5)": _us(_loop_lu, J, Jw, piv, b, bw) - _us(_loop_copy, J, Jw, b, bw),
-        "state check + actuator power": _us(_loop_check, q, v, kbar, lbar, u._uk, u._ul, prm, buf.copy(),
+        "state check + actuator power": _us(_loop_check, q, v, kbar, lbar, u.task.uk, u.task.ul, prm, buf.copy(),
                                             ibuf.copy()),
-        "observation (kappa, kappa_dot, kbar, body velocity)": _us(_loop_observe, q, v, kbar, u._w, u._obs_low,
-                                                                   u._obs_high, u._obs_raw.copy(),
-                                                                   u._obs.copy()),
+        "observation (kappa, kappa_dot, kbar, body velocity)": _us(_loop_observe, q, v, kbar, u.task.w, u.task.low,
+                                                                   u.task.high, u.task.raw.copy(),
+                                                                   u.task.obs.copy()),
     }
     print("\nCompiled parts, microseconds per call (in a compiled loop, no dispatch):")
     for name, us in parts.items():

@@ -7,10 +7,57 @@ All functions are plain numpy on arrays, so policies and tests share them.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["serpenoid_phase", "serpenoid", "serpenoid_on_nodes", "length_wave", "pulse_wave", "max_serpenoid_amplitude"]
+from soft_snake_gym.physics.geometry import polyline_crosses
+from soft_snake_gym.physics.simulator import body_from_curvature
+
+__all__ = [
+    "SerpenoidParams",
+    "serpenoid_phase",
+    "serpenoid",
+    "serpenoid_on_nodes",
+    "length_wave",
+    "pulse_wave",
+    "max_serpenoid_amplitude",
+]
+
+
+@dataclass(frozen=True)
+class SerpenoidParams:
+    """Serpenoid gait (docs/model.md §6), thesis defaults.
+
+    Attributes:
+        alpha: amplitude of the turning angle [rad] (pi/6).
+        omega: temporal frequency [rad/s] (2 pi / 3).
+        delta: phase offset between neighbouring nodes [rad]; None: 2 pi / (N - 2), one
+            wave along the body (pi/4 for N = 10).
+        gamma: turning bias [rad] (0).
+        psi0: phase of the clock at t = 0 [rad] (0).
+
+    On a refined rod (``Rod.refined``), ``alpha``, ``delta`` and ``gamma`` are those of the
+    robot as designed and are mapped onto arc length: each node runs ``alpha l / l_d``,
+    ``delta l / l_d`` and ``gamma l / l_d`` (``soft_snake_gym.gaits.serpenoid_on_nodes``), so
+    that the body wave is the same whatever N. The controllers' gains need no scaling: every
+    term of their laws is a per-node turning angle (or its rate or integral), the continuous
+    curvature times the edge length, so the law divided by ``l`` is the same law on
+    curvatures per unit length with the same gains [1/s]; the saturation
+    ``1.5 alpha omega`` follows the mapped ``alpha``.
+    """
+
+    alpha: float = math.pi / 6
+    omega: float = 2 * math.pi / 3
+    delta: float | None = None
+    gamma: float = 0.0
+    psi0: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.alpha < math.pi:
+            raise ValueError(f"alpha = {self.alpha!r} rad must be in [0, pi)")
+        if not self.omega >= 0:
+            raise ValueError(f"omega = {self.omega!r} rad/s must be >= 0")
 
 
 def serpenoid_phase(t: float, n_interior: int, omega: float, delta: float, psi0: float = 0.0) -> np.ndarray:
@@ -61,14 +108,12 @@ def serpenoid(psi: np.ndarray, psi_dot: float | np.ndarray, alpha: float, gamma:
 def max_serpenoid_amplitude(n_nodes: int, delta: float, gamma: float = 0.0) -> float:
     """Largest ``alpha`` (bisection, 1e-4 rad) whose serpenoid body with equal edges does not
     self-intersect at any phase (docs/model.md §6)."""
-    from soft_snake_gym.physics.simulator import body_from_curvature
-
     lbar = np.ones(n_nodes - 1)
 
     def crosses(alpha: float) -> bool:
         for psi0 in np.linspace(0.0, 2 * np.pi, 24, endpoint=False):
             k, _ = serpenoid(serpenoid_phase(0.0, n_nodes - 2, 0.0, delta, psi0), 0.0, alpha, gamma)
-            if _polyline_crosses(body_from_curvature(k, lbar)):
+            if polyline_crosses(body_from_curvature(k, lbar)):
                 return True
         return False
 
@@ -79,21 +124,6 @@ def max_serpenoid_amplitude(n_nodes: int, delta: float, gamma: float = 0.0) -> f
         mid = 0.5 * (lo + hi)
         lo, hi = (lo, mid) if crosses(mid) else (mid, hi)
     return lo
-
-
-def _polyline_crosses(x: np.ndarray) -> bool:
-    p, d = x[:-1], np.diff(x, axis=0)
-    for a in range(len(d)):
-        for b in range(a + 2, len(d)):
-            def orient(o, r, s):
-                return (r[0] - o[0]) * (s[1] - o[1]) - (r[1] - o[1]) * (s[0] - o[0])
-            d1 = orient(p[a], p[a] + d[a], p[b])
-            d2 = orient(p[a], p[a] + d[a], p[b] + d[b])
-            d3 = orient(p[b], p[b] + d[b], p[a])
-            d4 = orient(p[b], p[b] + d[b], p[a] + d[a])
-            if d1 * d2 < 0 and d3 * d4 < 0:
-                return True
-    return False
 
 
 def length_wave(t: float, n_edges: int, l0: float, eps: float, omega: float, delta_l: float,

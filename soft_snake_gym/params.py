@@ -13,7 +13,8 @@ import numbers
 from dataclasses import InitVar, dataclass, fields
 from typing import Any, Literal
 
-__all__ = ["Rod", "Fluid", "Ground", "Integrator", "SimConfig", "Medium", "plain_number"]
+__all__ = ["Rod", "Fluid", "Ground", "Integrator", "SimConfig", "Medium", "check_int", "check_number",
+           "plain_number"]
 
 Medium = Literal["water", "ground", "none"]
 
@@ -32,35 +33,53 @@ def plain_number(value: Any, integer: bool = False) -> int | float | None:
     return None if integer else float(value)
 
 
-def _check(owner: object, name: str, lo: float | None = None, hi: float | None = None,
-           lo_open: bool = False, hi_open: bool = False) -> None:
-    """Raise ``ValueError`` unless ``owner.name`` is a finite number within [lo, hi]."""
-    value = getattr(owner, name)
-    cls = type(owner).__name__
+def check_number(where: str, value: Any, lo: float | None = None, hi: float | None = None,
+                 lo_open: bool = False, hi_open: bool = False) -> int | float:
+    """The one validator of a real number: ``value`` as a Python number if it is a finite number
+    within [lo, hi] (open ends with ``lo_open``/``hi_open``; ``None``: unbounded), else
+    ``ValueError`` naming ``where`` (e.g. ``"Rod.E"``), the value and the allowed range."""
     left = "(" if lo_open or lo is None else "["
     right = ")" if hi_open or hi is None else "]"
     allowed = f"{left}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{right}"
     number = plain_number(value)
     if number is None:
-        raise ValueError(f"{cls}.{name} = {value!r} must be a number in {allowed}")
+        raise ValueError(f"{where} = {value!r} must be a number in {allowed}")
+    if not math.isfinite(number):
+        raise ValueError(f"{where} = {value!r} must be a finite number in {allowed}")
+    bad = False
+    if lo is not None:
+        bad |= number <= lo if lo_open else number < lo
+    if hi is not None:
+        bad |= number >= hi if hi_open else number > hi
+    if bad:
+        raise ValueError(f"{where} = {value!r} is outside the allowed range {allowed}")
+    return number
+
+
+def _check(owner: object, name: str, lo: float | None = None, hi: float | None = None,
+           lo_open: bool = False, hi_open: bool = False) -> None:
+    """:func:`check_number` on the field ``owner.name``; a numpy scalar becomes a Python number."""
+    value = getattr(owner, name)
+    number = check_number(f"{type(owner).__name__}.{name}", value, lo, hi, lo_open, hi_open)
     if type(number) is not type(value):  # a numpy scalar: keep the Python number
         object.__setattr__(owner, name, number)
-    bad = not math.isfinite(value)
-    if lo is not None:
-        bad |= value <= lo if lo_open else value < lo
-    if hi is not None:
-        bad |= value >= hi if hi_open else value > hi
-    if bad:
-        raise ValueError(f"{cls}.{name} = {value!r} is outside the allowed range {allowed}")
+
+
+def check_int(where: str, value: Any, lo: int, hi: int | None = None, hint: str = "") -> int:
+    """:func:`check_number` for integers: ``value`` as a Python ``int`` if it is an integer
+    (Python or numpy, not a bool) in [lo, hi], else ``ValueError`` naming ``where``, the value,
+    the allowed range and, if given, ``hint`` (what the number means or what else is allowed)."""
+    number = plain_number(value, integer=True)
+    if number is None or number < lo or (hi is not None and number > hi):
+        allowed = f"[{lo}, {'inf' if hi is None else hi}]"
+        raise ValueError(f"{where} = {value!r} must be an integer in {allowed}" + (f" ({hint})" if hint else ""))
+    return number
 
 
 def _check_int(owner: object, name: str, lo: int, hi: int | None = None) -> None:
+    """:func:`check_int` on the field ``owner.name``; a numpy integer becomes a Python int."""
     value = getattr(owner, name)
-    cls = type(owner).__name__
-    allowed = f"[{lo}, {'inf' if hi is None else hi}]"
-    number = plain_number(value, integer=True)
-    if number is None or number < lo or (hi is not None and number > hi):
-        raise ValueError(f"{cls}.{name} = {value!r} must be an integer in {allowed}")
+    number = check_int(f"{type(owner).__name__}.{name}", value, lo, hi)
     if type(number) is not type(value):  # a numpy integer: keep the Python int
         object.__setattr__(owner, name, number)
 

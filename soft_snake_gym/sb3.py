@@ -31,7 +31,6 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
-from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.registration import MAX_EPISODE_STEPS
 from soft_snake_gym.envs.vector import SoftVectorEnv
 
@@ -78,44 +77,38 @@ class SoftVecEnv(VecEnv):
     # --- VecEnv API ------------------------------------------------------------------------------
     def reset(self) -> np.ndarray:
         venv = self.venv
-        for i in range(self.num_envs):
-            options = self._options[i] or None
-            self.reset_infos[i] = venv._reset_robot(i, self._seeds[i], options)
-        venv._autoreset[:] = False
-        venv._needs_reset = False
+        self.reset_infos = venv.reset_robots(self._seeds, [options or None for options in self._options])
         self._reset_seeds()
         self._reset_options()
-        return venv._obs.copy()
+        return venv.obs.copy()
 
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions
 
     def step_wait(self):
         venv = self.venv
-        if venv._needs_reset:
+        if venv.needs_reset:
             raise RuntimeError(f"{self.env_id} SoftVecEnv: call reset() before step()")
-        terminated, truncated = venv._advance(self._actions, self._all)
-        rewards = venv._rs[:, T.R_REWARD].astype(np.float32)
+        terminated, truncated = venv.advance(self._actions, self._all)
+        rewards = venv.rewards.astype(np.float32)
         dones = terminated | truncated
         if self.step_info:
-            full = venv._infos(self._all, ~self._all, [])
+            full = venv.infos(self._all, ~self._all, [])
             infos = [_row(full, i) for i in range(self.num_envs)]
         else:
             infos = [{} for _ in range(self.num_envs)]
         if dones.any():
-            stats = venv._episode_stats(dones)
-            failures = venv._status
+            stats = venv.episode_stats(dones)
             for i in np.flatnonzero(dones):
-                env = venv.envs[i]
                 info = infos[i]
-                info["terminal_observation"] = venv._obs[i].copy()
+                info["terminal_observation"] = venv.obs[i].copy()
                 info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
                 info["episode"] = {"r": float(stats["r"][i]), "l": int(stats["l"][i]),
                                    "t": float(stats["t"][i])}
-                info["metrics"] = dict(zip(env._metric_keys, venv._rs[i, T.M_AVG :].tolist(), strict=True))
-                info["failure"] = env._failure if failures[i] else None
-                venv._reset_robot(i)
-        return venv._obs.copy(), rewards, dones, infos
+                info["metrics"] = venv.episode_metrics(i)
+                info["failure"] = venv.envs[i].failure
+                venv.reset_robot(i)
+        return venv.obs.copy(), rewards, dones, infos
 
     def close(self) -> None:
         self.venv.close()

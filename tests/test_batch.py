@@ -1,59 +1,75 @@
-"""The batched physics steps every robot exactly as a lone simulator would."""
+"""The one batched loop (``task.batch_step`` under the vector env) steps every robot exactly as a
+lone simulator would, over the public :class:`RobotBatch`."""
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from soft_snake_gym import Fluid, Rod, SimConfig, Simulator
-from soft_snake_gym.physics.batch import BatchSimulator
+from soft_snake_gym.envs import SoftVectorEnv
+from soft_snake_gym.envs.task import R_REWARD
 
 
 def test_batch_matches_single_simulators_bit_for_bit_with_any_thread_count():
     n, steps = 6, 120
     rng = np.random.default_rng(5)
-    U = rng.normal(0, 0.8, (steps, n, 8))
+    A = rng.uniform(-1, 1, (steps, n, 8))
     configs = [SimConfig(fluid=Fluid(rho=900 + 50 * i), rod=Rod(E_bend=1e5 * (i + 1))) for i in range(n)]
-    results = []
+    active = np.ones(n, dtype=bool)
+    results, inputs = [], []
     for threads in (1, 2):
-        batch = BatchSimulator(SimConfig(), n, num_threads=threads)
+        venv = SoftVectorEnv("SoftEel-v0", n, num_threads=threads, max_episode_steps=None)
+        venv.reset(seed=0)
+        batch = venv.batch
+        x0 = [sim.x for sim in batch.sims]
         for i, cfg in enumerate(configs):
             batch.sims[i].set_config(cfg)
+        u_k = []
         for s in range(steps):
-            assert batch.step(u_k=U[s]).all()
-        results.append((batch.q.copy(), batch.v.copy()))
+            terminated, _ = venv.advance(A[s], active)
+            assert not terminated.any()
+            u_k.append(batch.task.uk.copy())  # the inputs the kernel made of the actions
+        results.append((batch.sim.q.copy(), batch.sim.v.copy()))
+        inputs.append(u_k)
+    assert all(np.array_equal(a, b) for a, b in zip(*inputs, strict=True))
     singles = [Simulator(cfg) for cfg in configs]
+    for i, sim in enumerate(singles):
+        sim.reset(x=x0[i])
     for s in range(steps):
         for i, sim in enumerate(singles):
-            sim.step(u_k=U[s, i])
+            sim.step(u_k=inputs[0][s][i])
     for q, v in results:
-        assert np.array_equal(q, np.stack([s._q for s in singles]))
-        assert np.array_equal(v, np.stack([s._v for s in singles]))
+        assert np.array_equal(q, np.stack([s.arrays.q for s in singles]))
+        assert np.array_equal(v, np.stack([s.arrays.v for s in singles]))
     assert not np.array_equal(results[0][0][0], results[0][0][1])  # the robots really differ
 
 
+def test_robots_are_views_of_the_batch_arrays():
+    venv = SoftVectorEnv("SoftEel-v0", 3)
+    venv.reset(seed=1)
+    batch = venv.batch
+    assert batch.sims[2].arrays.q.base is batch.sim.q
+    assert np.array_equal(batch.sims[2].x.ravel(), batch.sim.q[2])
+    assert np.array_equal(batch.time, [0.0, 0.0, 0.0])
+    venv.step(np.zeros((3, 8)))
+    assert np.allclose(batch.time, batch.sims[0].h) and batch.sims[1].time == batch.time[1]
+    assert np.array_equal(venv.rewards, batch.task.rs[:, R_REWARD])
+
+
 def test_inactive_robots_stay_put_and_failures_are_per_robot():
-    batch = BatchSimulator(SimConfig(), 3)
-    u_l = np.zeros((3, 9))
-    u_l[1, 4] = 200.0  # robot 1 overstretches
-    q0 = batch.q.copy()
-    ok = batch.step(u_l=u_l, active=np.array([True, True, False]))
-    assert ok.tolist() == [True, False, True]
-    assert batch.sims[1].failure == "runaway_stretch" and batch.sims[0].failure is None
-    assert np.array_equal(batch.q[2], q0[2])
-    with pytest.raises(RuntimeError, match="robot 1 failed"):
-        batch.step()
-    batch.sims[1].reset()
-    assert batch.step().all()
-
-
-def test_bad_batch_arguments_are_explained():
-    with pytest.raises(ValueError, match=r"n = 0 robots"):
-        BatchSimulator(SimConfig(), 0)
-    with pytest.raises(ValueError, match=r"num_threads = 0"):
-        BatchSimulator(SimConfig(), 2, num_threads=0)
-    batch = BatchSimulator(SimConfig(), 2)
-    with pytest.raises(ValueError, match=r"u_k has shape \(8,\); expected \(2, 8\)"):
-        batch.step(u_k=np.zeros(8))
-    with pytest.raises(ValueError, match=r"non-finite entries for robots \[1\]"):
-        batch.step(u_k=np.array([[0.0] * 8, [np.nan] * 8]))
+    venv = SoftVectorEnv("SoftWorm-v0", 3)
+    venv.reset(seed=0)
+    batch = venv.batch
+    v = np.zeros((10, 2))
+    v[5, 1] = 1e3  # robot 1's node 5 leaves the body: runaway stretch
+    batch.sims[1].set_state(v=v)
+    q0 = batch.sim.q.copy()
+    terminated, truncated = venv.advance(np.full((3, 9), 0.5), np.array([True, True, False]))
+    assert terminated.tolist() == [False, True, False] and not truncated.any()
+    assert venv.envs[1].failure == "runaway_stretch" and batch.sims[1].failure == "runaway_stretch"
+    assert venv.envs[0].failure is None
+    assert np.array_equal(batch.sim.q[2], q0[2]) and not np.array_equal(batch.sim.q[0], q0[0])
+    venv.reset_robot(1, seed=0)
+    assert venv.envs[1].failure is None
+    terminated, _ = venv.advance(np.zeros((3, 9)), np.ones(3, dtype=bool))
+    assert not terminated.any()

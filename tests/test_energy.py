@@ -8,7 +8,7 @@ import pytest
 
 from soft_snake_gym import Fluid, Integrator, Rod, SimConfig, Simulator, body_from_curvature
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-from soft_snake_gym.physics import kernels as K
+from soft_snake_gym.physics import forces
 from soft_snake_gym.physics.banded import WIDTH, band_to_dense
 
 NO_DRAG = {"C_f": 0.0, "C_D": 0.0}  # water that stores energy but dissipates none
@@ -123,8 +123,8 @@ def _momentum_and_gradient(sim, q, v):
     """``P_f = dT_f/dv`` and ``G = dT_f/dx`` from the kernel, (2N,) each."""
     n = q.size
     P, G, J = np.zeros(n), np.zeros(n), np.zeros((n, WIDTH))
-    K.fluid_momentum(q, v, sim._prm, P, 1.0, 0.0, J, 0.0, False)
-    K.fluid_momentum(q, v, sim._prm, G, 0.0, 1.0, J, 0.0, False)
+    forces.fluid_momentum(q, v, sim.arrays.prm, P, 1.0, 0.0, J, 0.0, False)
+    forces.fluid_momentum(q, v, sim.arrays.prm, G, 0.0, 1.0, J, 0.0, False)
     return P, G
 
 
@@ -141,13 +141,13 @@ def _fd(f, z, eps=1e-6):
 @pytest.mark.parametrize("N", [3, 10])
 def test_consistent_added_mass_forces_and_jacobian_match_finite_differences(N):
     sim = _random_water_state(N)
-    q, v, prm = sim._q.copy(), sim._v.copy(), sim._prm
+    q, v, prm = sim.arrays.q.copy(), sim.arrays.v.copy(), sim.arrays.prm
     tf = sim.fluid_kinetic_energy()
     P, G = _momentum_and_gradient(sim, q, v)
     assert tf > 0.01
     # P_f and G are the gradients of T_f
-    fd_P = _fd(lambda z: K.fluid_kinetic_energy(q, z, prm), v)[0]
-    fd_G = _fd(lambda z: K.fluid_kinetic_energy(z, v, prm), q)[0]
+    fd_P = _fd(lambda z: forces.fluid_kinetic_energy(q, z, prm), v)[0]
+    fd_G = _fd(lambda z: forces.fluid_kinetic_energy(z, v, prm), q)[0]
     assert np.abs(P - fd_P).max() < 1e-7 * np.abs(P).max()
     assert np.abs(G - fd_G).max() < 1e-7 * np.abs(G).max()
     # the Newton matrix of the momentum-form residual: d/dv1 [P_f(q0 + dt v1, v1) - dt G(...)]
@@ -158,14 +158,14 @@ def test_consistent_added_mass_forces_and_jacobian_match_finite_differences(N):
         return P1 - dt * G1
 
     J = np.zeros((q.size, WIDTH))
-    K.fluid_momentum(q + dt * v, v, prm, np.zeros(q.size), 0.0, 0.0, J, dt, True)
+    forces.fluid_momentum(q + dt * v, v, prm, np.zeros(q.size), 0.0, 0.0, J, dt, True)
     analytic = band_to_dense(J, q.size)
     fd = _fd(r, v)
     assert np.abs(analytic - fd).max() < 1e-7 * np.abs(fd).max()
     assert np.abs(fd - fd.T).max() > 1e-3 * np.abs(fd).max()  # the skew (gyroscopic) part is there
     # the explicit velocity force is dT_f/dx - (dP_f/dx) v
     F = np.zeros(q.size)
-    K.munk_force(q, v, prm, F)
+    forces.munk_force(q, v, prm, F)
     dPdx_v = _fd(lambda z: _momentum_and_gradient(sim, z, v)[0], q) @ v
     assert np.abs(F - (G - dPdx_v)).max() < 1e-7 * np.abs(F).max()
 

@@ -20,6 +20,7 @@ from soft_snake_gym import Simulator, body_from_curvature
 from soft_snake_gym.config import ConfigError
 from soft_snake_gym.envs import InchEnv, InchSettings, SwimEnv, SwimSettings
 from soft_snake_gym.gaits import pulse_wave, serpenoid, serpenoid_phase
+from soft_snake_gym.physics import layout as L
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "soft_snake_gym" / "configs" / "env"
@@ -288,6 +289,18 @@ def test_inching_wave_moves_the_worm_forward_and_reports_friction():
     assert info["stuck"].dtype == bool and info["stuck"].shape == (10,)
 
 
+def test_cost_of_transport_takes_gravity_from_the_ground():
+    env = gym.make("SoftWorm-v0", reset_noise_scale=0.0, ground={"g": 4.0})
+    env.reset(seed=0)
+    u = env.unwrapped
+    for _ in range(100):
+        _, ld = pulse_wave(u.sim.time, u.N - 1, 0.18, 0.3, 2 * math.pi, math.pi / 4, 0.6)
+        info = env.step((ld / u.max_length_rate).astype(np.float32))[4]
+    m = info["metrics"]
+    assert m["distance"] > 0
+    assert m["cost_of_transport"] == pytest.approx(m["energy_actuator"] / (7.2 * 4.0 * m["distance"]))
+
+
 def test_actuator_energy_source_for_the_worm():
     env = gym.make("SoftWorm-v0", energy_source="actuator")
     env.reset(seed=0)
@@ -495,18 +508,16 @@ def test_docstring_argument_table_lists_every_keyword(cls, settings):
 # --- presets and the start on the gait --------------------------------------------------------
 @pytest.mark.parametrize("env_id", IDS)
 def test_preset_sets_the_physics_and_explicit_keywords_override_it(env_id, tmp_path):
-    from soft_snake_gym.physics import kernels as K
-
     env = gym.make(env_id, preset="thesis", rod={"E_bend": 1e5}).unwrapped
     cfg = env.sim.config
     assert cfg.rod.damping_bend == 0.0 and cfg.rod.damping_stretch == 0.0 and cfg.rod.E_bend == 1e5
     assert cfg.fluid.added_mass == "kelasidi"
-    assert env.sim._prm[K.P_DBEND] == 0.0 and env.sim._prm[K.P_DSTRETCH] == 0.0
-    assert env.sim._prm[K.P_ADDED_MASS] == K.ADDED_MASS_KELASIDI
+    assert env.sim.arrays.prm[L.P_DBEND] == 0.0 and env.sim.arrays.prm[L.P_DSTRETCH] == 0.0
+    assert env.sim.arrays.prm[L.P_ADDED_MASS] == L.ADDED_MASS_KELASIDI
     env = gym.make(env_id, preset="thesis", rod={"damping_bend": 0.7}, fluid={"added_mass": "consistent"}).unwrapped
-    assert env.sim.config.rod.damping_bend == 0.7 and env.sim._prm[K.P_DBEND] == 0.7
+    assert env.sim.config.rod.damping_bend == 0.7 and env.sim.arrays.prm[L.P_DBEND] == 0.7
     assert env.sim.config.rod.damping_stretch == 0.0
-    assert env.sim._prm[K.P_ADDED_MASS] == K.ADDED_MASS_CONSISTENT
+    assert env.sim.arrays.prm[L.P_ADDED_MASS] == L.ADDED_MASS_CONSISTENT
     # a config file may name the preset; its own keys and explicit keywords win over it
     path = tmp_path / "cfg.yaml"
     path.write_text("preset: thesis\nrod: {damping_stretch: 3.0}\n")

@@ -9,7 +9,7 @@ import pytest
 
 from soft_snake_gym import Fluid, Integrator, Rod, SimConfig, Simulator, body_from_curvature
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-from soft_snake_gym.physics import kernels as K
+from soft_snake_gym.physics import forces, layout
 
 RNG_SEED = 1234
 
@@ -26,7 +26,7 @@ def bent_simulator(N: int, medium: str = "none", damping: float = 0.0, seed: int
 
 
 def energy_at(sim: Simulator, q: np.ndarray) -> float:
-    return K.elastic_energy(q, sim._kbar, sim._lbar, sim._prm)
+    return forces.elastic_energy(q, sim.arrays.kbar, sim.arrays.lbar, sim.arrays.prm)
 
 
 def total_energy(sim: Simulator) -> float:
@@ -37,7 +37,7 @@ def total_energy(sim: Simulator) -> float:
 def test_forces_are_minus_the_energy_gradient(N):
     sim = bent_simulator(N)
     F = sim.elastic_forces().ravel()
-    q = sim._q.copy()
+    q = sim.arrays.q.copy()
     grad = np.zeros_like(q)
     eps = 1e-6
     for i in range(q.size):
@@ -49,9 +49,9 @@ def test_forces_are_minus_the_energy_gradient(N):
 
 
 def _fd_jacobians(sim: Simulator, water: bool, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
-    n = sim._q.size
+    n = sim.arrays.q.size
     fd_x, fd_v = np.zeros((n, n)), np.zeros((n, n))
-    for arr, fd in ((sim._q, fd_x), (sim._v, fd_v)):
+    for arr, fd in ((sim.arrays.q, fd_x), (sim.arrays.v, fd_v)):
         for i in range(n):
             old = arr[i]
             arr[i] = old + eps
@@ -107,7 +107,7 @@ def test_banded_added_mass_solve_matches_dense():
     rng = np.random.default_rng(7)
     F = rng.normal(size=2 * N)
     a = np.zeros(2 * N)
-    K.solve_mass(sim._q, sim._prm, sim._buf[K.B_M], F, a, sim._J, sim._ibuf[K.I_PIV], True)
+    forces.solve_mass(sim.arrays.q, sim.arrays.prm, sim.arrays.buf[layout.B_M], F, a, sim.arrays.J, sim.arrays.ibuf[layout.I_PIV], True)
     # dense M + M_A straight from docs/model.md §4
     Md = np.diag(np.repeat(sim.masses, 2))
     x = sim.x

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from soft_snake_gym import Integrator, Rod, SimConfig, SimulationError, Simulator, body_from_curvature
+from soft_snake_gym.physics import allocate_arrays
 
 
 def test_body_from_curvature_puts_the_head_ahead_along_plus_x():
@@ -62,6 +63,18 @@ def test_bad_inputs_raise_clear_errors(kwargs, match):
     with pytest.raises(ValueError, match=match):
         sim.step(**kwargs)
     assert np.array_equal(sim.x, x0) and sim.time == 0.0  # nothing happened
+
+
+def test_simulator_over_given_arrays_uses_them_and_rejects_wrong_ones():
+    stacked = allocate_arrays(10, (2,))
+    sim = Simulator(arrays=stacked.row(1))
+    sim.step(u_k=np.full(8, 0.5))
+    assert np.array_equal(stacked.q[1], sim.x.ravel()) and not stacked.q[0].any()
+    assert sim.arrays.kbar.base is stacked.kbar and stacked.kbar[1, 0] == pytest.approx(0.005)
+    with pytest.raises(ValueError, match=r"arrays is SimArrays with q of shape \(2, 20\): need .* q of shape \(20,\)"):
+        Simulator(arrays=stacked)
+    with pytest.raises(ValueError, match=r"arrays is tuple: need the SimArrays of one robot of N = 10"):
+        Simulator(arrays=tuple(stacked.row(0)))
 
 
 def test_bad_state_raises_clear_errors():

@@ -15,6 +15,7 @@ from gymnasium.wrappers.vector import RecordEpisodeStatistics
 
 import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.envs import InchEnv, SoftVectorEnv, SwimEnv
+from soft_snake_gym.envs.task import T_GOAL
 
 IDS = ["SoftEel-v0", "SoftWorm-v0"]
 # settings under which random actions end episodes both ways within a few hundred steps: the
@@ -108,13 +109,16 @@ def test_autoreset_next_step_returns_the_last_obs_then_a_reset_robot():
     venv = SoftVectorEnv("SoftEel-v0", 2, max_episode_steps=3)
     venv.reset(seed=0)
     a = np.full((2, 8), 0.5, np.float32)
+    returns = np.zeros(2)
     for _ in range(2):
-        _, _, term, trunc, _ = venv.step(a)
+        _, rew, term, trunc, _ = venv.step(a)
+        returns += rew
         assert not (term.any() or trunc.any())
     obs, rew, term, trunc, info = venv.step(a)
+    returns += rew
     assert trunc.all() and not term.any()
     assert np.array_equal(info["episode"]["l"], [3, 3]) and info["_episode"].all()
-    np.testing.assert_allclose(info["episode"]["r"], venv._returns)
+    np.testing.assert_allclose(info["episode"]["r"], returns)
     assert np.all(info["time"] == pytest.approx(0.03))
     obs2, rew2, term2, trunc2, info2 = venv.step(np.full((2, 8), np.nan, np.float32))  # ignored
     assert np.array_equal(rew2, [0.0, 0.0]) and not (term2.any() or trunc2.any())
@@ -170,14 +174,14 @@ def test_reset_accepts_one_seed_per_robot_and_options():
     assert np.array_equal(obs[0], single.reset(seed=7)[0])
     assert np.array_equal(obs[1], single.reset(seed=3)[0])
     _, info = venv.reset(seed=0, options={"goal_direction": 1.0})
-    assert np.allclose(venv._task["tp"][:, 6], 1.0)
+    assert np.allclose(venv.batch.task.tp[:, T_GOAL], 1.0)
     assert info["heading"].shape == (2,)
 
 
 def test_bad_arguments_are_explained():
-    with pytest.raises(ValueError, match=r"num_envs = 0: need an integer >= 1"):
+    with pytest.raises(ValueError, match=r"num_envs = 0 must be an integer in \[1, inf\] \(the number of robots\)"):
         SoftVectorEnv("SoftEel-v0", 0)
-    with pytest.raises(ValueError, match=r"num_threads = 0: need an integer in \[1, "):
+    with pytest.raises(ValueError, match=r"num_threads = 0 must be an integer in \[1, "):
         SoftVectorEnv("SoftEel-v0", 2, num_threads=0)
     with pytest.raises(ValueError, match=r"num_threads = 99"):
         SoftVectorEnv("SoftEel-v0", 2, num_threads=99)

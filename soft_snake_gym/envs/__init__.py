@@ -9,7 +9,8 @@ from soft_snake_gym.envs.base import Randomization, SoftRobotEnv
 from soft_snake_gym.envs.inch import InchEnv, InchSettings
 from soft_snake_gym.envs.registration import ENV_IDS, register_envs
 from soft_snake_gym.envs.swim import SwimEnv, SwimSettings
-from soft_snake_gym.envs.vector import InchVectorEnv, SoftVectorEnv, SwimVectorEnv
+from soft_snake_gym.envs.task import TaskArrays
+from soft_snake_gym.envs.vector import InchVectorEnv, RobotBatch, SoftVectorEnv, SwimVectorEnv
 
 __all__ = [
     "ENV_IDS",
@@ -17,10 +18,12 @@ __all__ = [
     "InchSettings",
     "InchVectorEnv",
     "Randomization",
+    "RobotBatch",
     "SoftRobotEnv",
     "SoftVectorEnv",
     "SwimEnv",
     "SwimSettings",
     "SwimVectorEnv",
+    "TaskArrays",
     "register_envs",
 ]

@@ -25,13 +25,12 @@ import numpy as np
 
 from soft_snake_gym.config import ConfigError, config_path, from_dict, load_yaml, with_preset
 from soft_snake_gym.envs import task as T
-from soft_snake_gym.envs.task import G
-from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig, plain_number
+from soft_snake_gym.envs.task import TaskArrays
+from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig, check_number, plain_number
 from soft_snake_gym.physics import Simulator, body_from_curvature
-from soft_snake_gym.physics import kernels as K
+from soft_snake_gym.physics.layout import OK, STATUS_REASONS
 
 __all__ = [
-    "G",
     "Randomization",
     "BaseSettings",
     "SoftRobotEnv",
@@ -42,15 +41,6 @@ SLOW_SUBSTEPS = 1000
 """Explicit sub-steps per integrator step above which an env warns that it will be slow."""
 
 # --- settings ---------------------------------------------------------------------------------
-def _check_number(cls: str, name: str, value: Any, lo: float | None = None, lo_open: bool = False) -> None:
-    number = plain_number(value)
-    if number is None or not math.isfinite(number):
-        bound = "" if lo is None else f" {'>' if lo_open else '>='} {lo}"
-        raise ValueError(f"{cls}.{name} = {value!r} must be a finite number{bound}")
-    if lo is not None and (value <= lo if lo_open else value < lo):
-        raise ValueError(f"{cls}.{name} = {value!r} must be {'>' if lo_open else '>='} {lo}")
-
-
 @dataclass(frozen=True)
 class Randomization:
     """Per-episode physics randomization: each field is ``None`` (not randomized) or a range
@@ -177,7 +167,7 @@ class BaseSettings:
             if number is not None and type(number) is not type(getattr(self, f.name)):
                 object.__setattr__(self, f.name, number)
         if self.dt is not None:
-            _check_number(cls, "dt", self.dt, 0.0, lo_open=True)
+            check_number(f"{cls}.dt", self.dt, 0.0, lo_open=True)
             ratio = self.dt / self.integrator.h
             if ratio < 0.999 or abs(ratio - round(ratio)) > 1e-6 * ratio:
                 raise ValueError(
@@ -185,10 +175,10 @@ class BaseSettings:
                     f"step integrator.h = {self.integrator.h!r}"
                 )
         for name in ("forward_reward_weight", "goal_direction"):
-            _check_number(cls, name, getattr(self, name))
+            check_number(f"{cls}.{name}", getattr(self, name))
         for name in ("energy_cost_weight", "ctrl_cost_weight", "failure_cost", "reset_noise_scale"):
-            _check_number(cls, name, getattr(self, name), 0.0)
-        _check_number(cls, "max_observed_speed", self.max_observed_speed, 0.0, lo_open=True)
+            check_number(f"{cls}.{name}", getattr(self, name), 0.0)
+        check_number(f"{cls}.max_observed_speed", self.max_observed_speed, 0.0, lo_open=True)
 
 
 def resolve_settings(settings_cls: type, medium: str, config: str | Path | None, kwargs: dict,
@@ -229,24 +219,29 @@ def _display_available() -> bool:
 class SoftRobotEnv(gym.Env):
     """Base of :class:`~soft_snake_gym.envs.SwimEnv` and :class:`~soft_snake_gym.envs.InchEnv`.
 
-    Subclasses set ``medium``, ``settings_class``, ``env_id`` and implement the hooks
-    ``_setup_task``, ``_build_spaces``, ``_action_params``, ``_initial_body``, ``_state_info``
-    and ``_check_options``.
+    Subclasses set ``medium``, ``settings_class``, ``env_id``, ``medium_energy_key``,
+    ``medium_power_key``, ``shape_key`` and implement the hooks ``_setup_task``,
+    ``_build_spaces``, ``_action_params``, ``_initial_body``, ``_shape_info`` and
+    ``_check_options``.
 
     Attributes:
         settings: the validated constructor keywords (``SwimSettings`` or ``InchSettings``).
         sim: the :class:`~soft_snake_gym.physics.Simulator` (one robot), built once and
             reused by every ``reset``; read its state (``sim.x`` (N, 2) [m], ``sim.kbar``,
-            ``sim.lbar``, energies) between steps, but step through the env.
+            ``sim.lbar``, ``sim.time`` [s], energies) between steps, but step through the env.
+        task: the task kernels' :class:`~soft_snake_gym.envs.task.TaskArrays` (action, inputs,
+            observation, reward terms and metrics of the last step); read-only for users.
         base_config: the :class:`~soft_snake_gym.params.SimConfig` the env was built with
             (``randomize`` draws around it at each reset).
         N: number of nodes.
         dt: control step [s]: ``n_substeps`` integrator steps of ``integrator.h``.
         n_substeps: integrator steps per control step.
-        observation_structure: block name -> size of the observation, in order.
+        observation_structure: block name -> size of the observation, in order (the
+            Observation Space table of the env's docstring).
         goal_direction: the episode's goal direction [rad from +x].
         randomized: the physics values drawn at the last reset (empty without ``randomize``).
         total_mass: mass of the body [kg].
+        metric_keys: names of the running episode metrics in ``info["metrics"]``.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 100}
@@ -254,6 +249,9 @@ class SoftRobotEnv(gym.Env):
     settings_class: ClassVar[type] = BaseSettings
     env_id: ClassVar[str] = ""
     medium_energy_key: ClassVar[str] = "energy_fluid"
+    medium_power_key: ClassVar[str] = "fluid_power"
+    shape_key: ClassVar[str] = "kbar"
+    """The rest shape the actions drive (``"kbar"`` or ``"lbar"``), a state entry of ``info``."""
     trail_length: ClassVar[int] = 300
 
     def __init__(self, render_mode: str | None = None, config: str | Path | None = None, **kwargs: Any):
@@ -270,7 +268,7 @@ class SoftRobotEnv(gym.Env):
             )
 
     @classmethod
-    def _over_arrays(cls, settings: BaseSettings, sim: Simulator, task: dict[str, np.ndarray]):
+    def over_arrays(cls, settings: BaseSettings, sim: Simulator, task: TaskArrays | None):
         """An env (no rendering) over a given simulator and task arrays, e.g. views of a batch's
         stacked arrays: how the vector env keeps one env object per robot."""
         env = cls.__new__(cls)
@@ -278,7 +276,7 @@ class SoftRobotEnv(gym.Env):
         return env
 
     def _setup(self, settings: BaseSettings, render_mode: str | None, sim: Simulator | None = None,
-               task: dict[str, np.ndarray] | None = None) -> None:
+               task: TaskArrays | None = None) -> None:
         settings.randomize.check(self.medium, settings.ground, self.env_id or type(self).__name__)
         self.settings = s = settings
         self.base_config = SimConfig(
@@ -320,30 +318,25 @@ class SoftRobotEnv(gym.Env):
         self._act_shape = self.action_space.shape
         if task is None:
             task = T.allocate_task(self.N, self._act_shape[0], box.shape[0])
-        self._task = task
-        (self._tp, self._rs, self._act, self._uk, self._ul, self._w, self._obs_low, self._obs_high,
-         self._obs_raw, self._obs) = (task[k] for k in ("tp", "rs", "act", "uk", "ul", "w", "low",
-                                                         "high", "raw", "obs"))
-        self._obs_low[:] = box.low
-        self._obs_high[:] = box.high
-        self._w[:] = self._mass_fraction
+        self.task = task
+        task.low[:] = box.low
+        task.high[:] = box.high
+        task.w[:] = self._mass_fraction
         kind, scale, lo, hi, energy = self._action_params()
-        tp = self._tp
+        tp = task.tp
         tp[T.T_KIND], tp[T.T_SCALE], tp[T.T_LO], tp[T.T_HI], tp[T.T_ESRC] = kind, scale, lo, hi, energy
         tp[T.T_DT] = self.dt
         tp[T.T_NSUB] = self.n_substeps
         tp[T.T_WF], tp[T.T_WE] = s.forward_reward_weight, s.energy_cost_weight
         tp[T.T_WC], tp[T.T_FAIL] = s.ctrl_cost_weight, s.failure_cost
         tp[T.T_MASS] = self.total_mass
-        sim = self.sim
-        self._phys = (sim._q, sim._v, sim._kbar, sim._lbar, sim._prm, sim._buf, sim._J, sim._ibuf, sim._out)
         self._set_goal(s.goal_direction)
         self._failure: str | None = None
         self._needs_reset = True
         self._trail_com: deque = deque(maxlen=self.trail_length)
         self._trail_head: deque = deque(maxlen=self.trail_length)
         self.randomized: dict[str, float] = {}
-        self._metric_keys = tuple(k or self.medium_energy_key for k in T.METRIC_KEYS)
+        self.metric_keys = tuple(k or self.medium_energy_key for k in T.METRIC_KEYS)
 
     # --- hooks ------------------------------------------------------------------------------
     def _setup_task(self) -> None:
@@ -361,9 +354,38 @@ class SoftRobotEnv(gym.Env):
     def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
         raise NotImplementedError
 
-    def _state_info(self, r: list[float]) -> dict[str, Any]:
-        """The state entries of ``info``; ``r`` is ``self._rs`` as a list."""
+    def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
+        """The body's entries of ``info`` from the unclipped observation ``raw`` and the driven
+        rest shape ``shape`` (new arrays); (n_obs,) for one robot or (n, n_obs) for a batch."""
         raise NotImplementedError
+
+    # --- info: the one place it is built (the vector env calls these too) -------------------
+    def state_info(self, r: Any, time: Any, shape: np.ndarray, newton_iterations: Any,
+                   raw: np.ndarray) -> dict[str, Any]:
+        """The state entries of ``info``, for this robot or, as arrays over robots, for a batch.
+
+        Args:
+            r: the task state ``task.rs`` as a list (one robot) or its rows ``rs.T`` (a batch).
+            time: simulated time [s].
+            shape: the driven rest shape (``shape_key``), a new array.
+            newton_iterations: Newton iterations of the last step.
+            raw: the unclipped observation ``task.raw``.
+        """
+        info = {
+            "x_position": r[T.R_COMX],
+            "y_position": r[T.R_COMY],
+            "heading": r[T.R_HEADING],
+            "time": time,
+            self.medium_power_key: r[T.R_P_MED],
+            "actuator_power": r[T.R_P_ACT],
+        }
+        info.update(self._shape_info(raw, shape))
+        info["newton_iterations"] = newton_iterations
+        return info
+
+    def _own_state_info(self, r: list[float]) -> dict[str, Any]:
+        sim = self.sim
+        return self.state_info(r, sim.time, getattr(sim, self.shape_key), sim.newton_iterations, self.task.raw)
 
     def _check_options(self, body: dict[str, np.ndarray]) -> None:
         """Reject an initial body from ``reset(options=...)`` that violates the env's bounds."""
@@ -388,7 +410,7 @@ class SoftRobotEnv(gym.Env):
         s = self.settings
         options = dict(options or {})
         goal = options.pop("goal_direction", s.goal_direction)
-        _check_number("reset options", "goal_direction", goal)
+        check_number("reset options.goal_direction", goal)
         body_keys = ("x", "v", "kbar", "lbar")
         unknown = sorted(set(options) - set(body_keys))
         if unknown:
@@ -411,19 +433,17 @@ class SoftRobotEnv(gym.Env):
 
         self._failure = None
         self._needs_reset = False
-        q, v, kbar, lbar, prm, _, _, ibuf, out = self._phys
-        T.robot_reset(q, v, kbar, lbar, prm, ibuf, out, self._w, self._tp, self._obs_low,
-                      self._obs_high, self._obs_raw, self._obs, self._rs)
+        T.robot_reset(tuple(self.sim.arrays), tuple(self.task))  # plain tuples: see physics.layout
         self._trail_com.clear()
         self._trail_head.clear()
         self._record_trail()
-        info = self._state_info(self._rs.tolist())
+        info = self._own_state_info(self.task.rs.tolist())
         self._last_state_info = info.copy()
         info["randomized"] = dict(self.randomized)
         info["failure"] = None
         if self.render_mode == "human":
             self.render()
-        return self._obs.copy(), info
+        return self.task.obs.copy(), info
 
     def step(self, action):
         """Hold ``action`` for one control step of ``dt`` seconds and advance the physics.
@@ -450,13 +470,13 @@ class SoftRobotEnv(gym.Env):
             raise RuntimeError(
                 f"{self.env_id} episode terminated ({self._failure}); call reset() before stepping again"
             )
-        act = self._act
+        task = self.task
+        act = task.act
         if type(action) is np.ndarray and action.shape == self._act_shape and action.dtype.kind == "f":
             act[:] = action
         else:
             act[:] = self._check_action(action)
-        status = T.robot_step(act, *self._phys, self._uk, self._ul, self._w, self._tp, self._obs_low,
-                              self._obs_high, self._obs_raw, self._obs, self._rs)
+        status = T.robot_step(tuple(self.sim.arrays), tuple(task))  # plain tuples: see physics.layout
         if status == T.BAD_ACTION:
             a = np.asarray(action, dtype=np.float64)
             bad = np.flatnonzero(~np.isfinite(a)).tolist()
@@ -464,24 +484,23 @@ class SoftRobotEnv(gym.Env):
                 f"{self.env_id} action has non-finite entries at indices {bad} ({a[bad].tolist()}); "
                 "every entry must be a finite number in [-1, 1]"
             )
-        ok = status == K.OK
-        r = self._rs.tolist()
+        ok = status == OK
+        r = task.rs.tolist()
         if ok:
-            info = self._state_info(r)
+            info = self._own_state_info(r)
             self._last_state_info = info.copy()
         else:  # the last valid state, in new arrays (returned data must not be shared)
-            self._failure = self.sim.failure = K.STATUS_REASONS[status]
+            self.fail(STATUS_REASONS[status])
             info = {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in self._last_state_info.items()}
-        info["forward_speed"] = r[T.R_FWD]
-        info.update(zip(T.TERM_KEYS, r[T.R_RF : T.R_RFAIL + 1], strict=True))
+        info.update(T.reward_terms(r))
         info["failure"] = self._failure
-        info["metrics"] = dict(zip(self._metric_keys, r[T.M_AVG :], strict=True))
+        info["metrics"] = T.episode_metrics(r, self.metric_keys)
         info["energy"] = self.sim.energy_ledger()
         if self.render_mode is not None and ok:
             self._record_trail()
         if self.render_mode == "human":
             self.render()
-        return self._obs.copy(), r[T.R_REWARD], not ok, False, info
+        return task.obs.copy(), r[T.R_REWARD], not ok, False, info
 
     def render(self):
         """The current frame: an (H, W, 3) uint8 RGB array with ``render_mode="rgb_array"``;
@@ -507,6 +526,16 @@ class SoftRobotEnv(gym.Env):
             self.sim.time, self._goal, self.env_id, self._failure,
             self.sim.stuck if self._failure is None and self.medium == "ground" else None,
         )
+
+    @property
+    def failure(self) -> str | None:
+        """Why the episode ended (a ``STATUS_REASONS`` entry), or None while it runs."""
+        return self._failure
+
+    def fail(self, reason: str) -> None:
+        """End the episode with ``reason``: what a step that failed does (the vector env calls
+        it for a robot whose batched step failed)."""
+        self._failure = self.sim.failure = reason
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -536,17 +565,18 @@ class SoftRobotEnv(gym.Env):
     def _set_goal(self, goal: float) -> None:
         self.goal_direction = goal
         self._goal = np.array([math.cos(goal), math.sin(goal)])
-        self._tp[T.T_GOAL], self._tp[T.T_GCOS], self._tp[T.T_GSIN] = goal, self._goal[0], self._goal[1]
+        tp = self.task.tp
+        tp[T.T_GOAL], tp[T.T_GCOS], tp[T.T_GSIN] = goal, self._goal[0], self._goal[1]
 
     @property
     def _com(self) -> np.ndarray:
         """Centre of mass at the last valid state, (2,) [m]."""
-        return self._rs[T.R_COMX : T.R_COMY + 1].copy()
+        return self.task.rs[T.R_COMX : T.R_COMY + 1].copy()
 
     def _record_trail(self) -> None:
         if self.render_mode is None:
             return
-        q = self.sim._q
+        q = self.sim.arrays.q
         self._trail_com.append(self._com)
         self._trail_head.append((q[-2], q[-1]))
         self._last_x = self.sim.x

@@ -9,7 +9,8 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from soft_snake_gym.envs import task as T
-from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number
+from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv
+from soft_snake_gym.params import check_number
 
 __all__ = ["InchEnv", "InchSettings"]
 
@@ -27,7 +28,7 @@ class InchSettings(BaseSettings):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _check_number("InchSettings", "max_length_rate", self.max_length_rate, 0.0, lo_open=True)
+        check_number("InchSettings.max_length_rate", self.max_length_rate, 0.0, lo_open=True)
         lim = tuple(self.rest_length_limits)
         object.__setattr__(self, "rest_length_limits", lim)
         if len(lim) != 2 or not (0.0 < lim[0] <= 1.0 <= lim[1]):
@@ -145,15 +146,9 @@ class InchEnv(SoftRobotEnv):
     | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping_bend, damping_stretch, mu_s, mu_d (every mu_d draw <= every mu_s draw; not the fluid's) |
 
     ## Attributes
-    - ``sim``: the :class:`~soft_snake_gym.physics.Simulator` (one robot), built once and
-      reused by every reset; read its state between steps (``sim.x`` (N, 2) m, ``sim.kbar``,
-      ``sim.lbar``, ``sim.time`` s, energies), but step through the env.
-    - ``dt``: the control step [s], ``n_substeps`` integrator steps of ``integrator.h``.
-    - ``N``: number of nodes; ``total_mass`` [kg].
-    - ``observation_structure``: observation block name -> size, in order (the table above).
-    - ``settings``: the validated keywords; ``base_config``: the ``SimConfig`` built from them.
-    - ``goal_direction`` [rad]: the episode's goal; ``randomized``: the physics drawn at the
-      last reset.
+    Those of :class:`~soft_snake_gym.envs.base.SoftRobotEnv` (``sim``, ``task``, ``dt``, ``N``,
+    ``total_mass``, ``observation_structure``, ``settings``, ``base_config``,
+    ``goal_direction``, ``randomized``, ``metric_keys``).
 
     ## Version History
     * v0: initial version, on the PDER simulator of ``soft_snake_gym.physics``.
@@ -163,6 +158,8 @@ class InchEnv(SoftRobotEnv):
     settings_class = InchSettings
     env_id = "SoftWorm-v0"
     medium_energy_key = "energy_friction"
+    medium_power_key = "friction_power"
+    shape_key = "lbar"
 
     def __init__(self, render_mode: str | None = None, config: Any = None, **kwargs: Any):
         super().__init__(render_mode=render_mode, config=config, **kwargs)
@@ -214,18 +211,6 @@ class InchEnv(SoftRobotEnv):
                 f"rest_length_limits [{lo:.4g}, {hi:.4g}] m; keep it within those bounds"
             )
 
-    def _state_info(self, r: list[float]) -> dict[str, Any]:
-        sim = self.sim
+    def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
         m = self.N - 1
-        return {
-            "x_position": r[T.R_COMX],
-            "y_position": r[T.R_COMY],
-            "heading": r[T.R_HEADING],
-            "time": sim.time,
-            "friction_power": r[T.R_P_MED],
-            "actuator_power": r[T.R_P_ACT],
-            "edge_lengths": self._obs_raw[:m].copy(),
-            "lbar": sim.lbar,
-            "stuck": self._obs_raw[3 * m : 4 * m + 1] > 0.5,
-            "newton_iterations": sim.newton_iterations,
-        }
+        return {"edge_lengths": raw[..., :m].copy(), "lbar": shape, "stuck": raw[..., 3 * m : 4 * m + 1] > 0.5}

@@ -10,16 +10,16 @@ compute observations with the same code.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 from numba import njit
 
-from soft_snake_gym.physics import kernels as K
+from soft_snake_gym.physics import geometry, layout
 from soft_snake_gym.physics.cache import drop_stale_cache
+from soft_snake_gym.physics.layout import STUCK
 
 __all__ = ["scale_rates", "body_velocity", "swim_observation", "inch_observation"]
 
-drop_stale_cache(__file__, [K.__file__, str(Path(K.__file__).with_name("banded.py"))])
+drop_stale_cache(__file__, [geometry.__file__, layout.__file__])  # the cached kernels embed their code
 
 
 @njit(cache=True)
@@ -88,8 +88,8 @@ def swim_observation(q, v, kbar, w, goal, low, high, raw, out):
     ``out`` (float32). Returns the heading [rad].
     """
     n = kbar.size
-    K.curvatures(q, raw[:n])
-    K.curvature_rates(q, v, raw[n : 2 * n])
+    geometry.curvatures(q, raw[:n])
+    geometry.curvature_rates(q, v, raw[n : 2 * n])
     for j in range(n):
         raw[2 * n + j] = kbar[j]
     heading, along, lateral = body_velocity(q, v, w)
@@ -107,12 +107,12 @@ def inch_observation(q, v, lbar, friction, ground, w, low, high, raw, out):
     lbar (N-1), stuck (N, 0/1 from the friction states ``friction``; all 0 unless ``ground``),
     com_velocity_body (2). Same outputs as :func:`swim_observation`; returns the heading [rad]."""
     m = lbar.size
-    K.edge_lengths(q, raw[:m])
-    K.edge_length_rates(q, v, raw[m : 2 * m])
+    geometry.edge_lengths(q, raw[:m])
+    geometry.edge_length_rates(q, v, raw[m : 2 * m])
     for k in range(m):
         raw[2 * m + k] = lbar[k]
     for i in range(m + 1):
-        raw[3 * m + i] = 1.0 if ground and friction[i] == K.STUCK else 0.0
+        raw[3 * m + i] = 1.0 if ground and friction[i] == STUCK else 0.0
     heading, along, lateral = body_velocity(q, v, w)
     raw[4 * m + 1] = along
     raw[4 * m + 2] = lateral

@@ -10,16 +10,17 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from soft_snake_gym.envs import task as T
-from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv, _check_number
+from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv
 from soft_snake_gym.gaits import (
-    _polyline_crosses,
+    SerpenoidParams,
     max_serpenoid_amplitude,
     serpenoid,
     serpenoid_on_nodes,
     serpenoid_phase,
 )
+from soft_snake_gym.params import check_number
 from soft_snake_gym.physics import body_from_curvature
-from soft_snake_gym.policies.open_loop import SerpenoidParams
+from soft_snake_gym.physics.geometry import polyline_crosses
 
 __all__ = ["SwimEnv", "SwimSettings"]
 
@@ -38,12 +39,12 @@ class SwimSettings(BaseSettings):
     def __post_init__(self) -> None:
         super().__post_init__()
         for name in ("max_curvature_rate", "max_rest_curvature"):
-            _check_number("SwimSettings", name, getattr(self, name), 0.0, lo_open=True)
-        _check_number("SwimSettings", "serpenoid_alpha", self.serpenoid_alpha, 0.0)
+            check_number(f"SwimSettings.{name}", getattr(self, name), 0.0, lo_open=True)
+        check_number("SwimSettings.serpenoid_alpha", self.serpenoid_alpha, 0.0)
         if self.serpenoid_alpha >= math.pi:
             raise ValueError(f"SwimSettings.serpenoid_alpha = {self.serpenoid_alpha!r} must be in [0, pi)")
         if self.serpenoid_delta is not None:
-            _check_number("SwimSettings", "serpenoid_delta", self.serpenoid_delta)
+            check_number("SwimSettings.serpenoid_delta", self.serpenoid_delta)
         if self.initial_shape not in ("straight", "serpenoid"):
             raise ValueError(
                 f"SwimSettings.initial_shape = {self.initial_shape!r}; use 'straight' or 'serpenoid'"
@@ -56,7 +57,7 @@ class SwimSettings(BaseSettings):
                     "parameters (alpha, omega, delta, gamma, psi0) or None"
                 )
             for name in ("alpha", "omega", "gamma", "psi0") + (("delta",) if gait.delta is not None else ()):
-                _check_number("SwimSettings", f"start_on_gait.{name}", getattr(gait, name))
+                check_number(f"SwimSettings.start_on_gait.{name}", getattr(gait, name))
             if self.initial_shape != "straight":
                 raise ValueError(
                     f"SwimSettings.start_on_gait and initial_shape = {self.initial_shape!r} both set "
@@ -125,7 +126,7 @@ class SwimEnv(SoftRobotEnv):
     its rest shape equal to that serpenoid (on a refined rod the same body: ``serpenoid_alpha``
     and ``serpenoid_delta`` are mapped onto arc length, ``gaits.serpenoid_on_nodes``). ``start_on_gait={"alpha": ..., "omega": ...,
     "delta": ..., "gamma": ..., "psi0": ...}`` (the fields of the baselines' serpenoid gait,
-    :class:`~soft_snake_gym.policies.open_loop.SerpenoidParams`; missing ones take its defaults,
+    :class:`~soft_snake_gym.gaits.SerpenoidParams`; missing ones take its defaults,
     the thesis gait): at rest on that gait, the sources' start (docs/model.md §7): curvatures and
     rest curvatures equal to ``kappa_des`` at t = 0 (``psi_j = delta j + psi0``; ``omega`` does
     not change the shape at rest), chord along +x, centre of mass at the origin, with **no**
@@ -194,15 +195,9 @@ class SwimEnv(SoftRobotEnv):
     | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping_bend, damping_stretch, rho, C_f, C_D, C_A (not the ground's) |
 
     ## Attributes
-    - ``sim``: the :class:`~soft_snake_gym.physics.Simulator` (one robot), built once and
-      reused by every reset; read its state between steps (``sim.x`` (N, 2) m, ``sim.kbar``,
-      ``sim.lbar``, ``sim.time`` s, energies), but step through the env.
-    - ``dt``: the control step [s], ``n_substeps`` integrator steps of ``integrator.h``.
-    - ``N``: number of nodes; ``total_mass`` [kg].
-    - ``observation_structure``: observation block name -> size, in order (the table above).
-    - ``settings``: the validated keywords; ``base_config``: the ``SimConfig`` built from them.
-    - ``goal_direction`` [rad]: the episode's goal; ``randomized``: the physics drawn at the
-      last reset.
+    Those of :class:`~soft_snake_gym.envs.base.SoftRobotEnv` (``sim``, ``task``, ``dt``, ``N``,
+    ``total_mass``, ``observation_structure``, ``settings``, ``base_config``,
+    ``goal_direction``, ``randomized``, ``metric_keys``).
 
     ## Version History
     * v0: initial version, on the PDER simulator of ``soft_snake_gym.physics``.
@@ -249,7 +244,7 @@ class SwimEnv(SoftRobotEnv):
                 f"beyond max_rest_curvature = {self.max_rest_curvature!r}; lower alpha or gamma or "
                 "raise the bound"
             )
-        if _polyline_crosses(body_from_curvature(kappa, np.ones(n + 1))):
+        if polyline_crosses(body_from_curvature(kappa, np.ones(n + 1))):
             limit = max_serpenoid_amplitude(self.N, delta, gamma)
             raise ValueError(
                 f"start_on_gait alpha = {gait.alpha!r} makes a self-intersecting body at t = 0 "
@@ -292,16 +287,5 @@ class SwimEnv(SoftRobotEnv):
                 f"max_rest_curvature = {self.max_rest_curvature!r}; keep it within that bound"
             )
 
-    def _state_info(self, r: list[float]) -> dict[str, Any]:
-        sim = self.sim
-        return {
-            "x_position": r[T.R_COMX],
-            "y_position": r[T.R_COMY],
-            "heading": r[T.R_HEADING],
-            "time": sim.time,
-            "fluid_power": r[T.R_P_MED],
-            "actuator_power": r[T.R_P_ACT],
-            "kappa": self._obs_raw[: self.N - 2].copy(),
-            "kbar": sim.kbar,
-            "newton_iterations": sim.newton_iterations,
-        }
+    def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
+        return {"kappa": raw[..., : self.N - 2].copy(), "kbar": shape}

@@ -6,39 +6,43 @@ vector env (:mod:`soft_snake_gym.envs.vector`) calls :func:`batch_step`, a ``pra
 the same :func:`robot_step` over robots, so a robot's results are bitwise the same in both.
 Resets stay in Python (seeded noise, randomization draws) and end with :func:`robot_reset`.
 
-Per robot, besides the simulator's arrays (``q, v, kbar, lbar, prm, buf, J, ibuf, out``):
-
-- ``tp`` (``N_TP``,) float64, the task's constants at indices ``T_*`` (kind, action scale and
-  bounds, control step, goal, reward weights, total mass);
-- ``rs`` (``N_RS``,) float64, the task's state and the last step's results at ``R_*``
-  (status, centre of mass, heading, powers, forward speed, reward terms, reward) and the
-  running episode metrics at ``M_*`` (docs/model.md §8);
-- ``act`` (n_act,) the action (clipped in place), ``uk`` (N-2,), ``ul`` (N-1,) the inputs,
-  ``w`` (N,) the mass fractions, ``low``/``high`` the observation bounds, ``raw`` (float64,
-  unclipped) and ``obs`` (float32) the observation.
+Per robot, the kernels take the simulator's :class:`~soft_snake_gym.physics.SimArrays` and the
+task's :class:`TaskArrays` (both stacked on a leading robot axis for :func:`batch_step`); Python
+passes them as plain tuples, which the kernels name on entry (see :mod:`soft_snake_gym.physics.layout`).
+Inside the kernels the task's scalars sit at named indices (``T_*`` in ``tp``, ``R_*`` and
+``M_*`` in ``rs``), as the simulator's do; Python reads them by name through
+:func:`reward_terms` and :func:`episode_metrics`.
 """
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
 from soft_snake_gym.envs import observe
-from soft_snake_gym.physics import kernels as K
+from soft_snake_gym.physics import banded, forces, geometry, stepper
+from soft_snake_gym.physics import layout as L
 from soft_snake_gym.physics.cache import drop_stale_cache
+from soft_snake_gym.physics.layout import SimArrays
 
-__all__ = ["robot_step", "robot_reset", "batch_step", "batch_step_serial", "allocate_task", "METRIC_KEYS",
-           "TERM_KEYS"]
+__all__ = [
+    "TaskArrays",
+    "allocate_task",
+    "robot_step",
+    "robot_reset",
+    "batch_step",
+    "batch_step_serial",
+    "reward_terms",
+    "episode_metrics",
+    "METRIC_KEYS",
+    "TERM_KEYS",
+]
 
-drop_stale_cache(
-    __file__, [K.__file__, str(Path(K.__file__).with_name("banded.py")), observe.__file__]
-)
-
-G = 9.81
-"""Gravity used by the cost of transport (docs/model.md §8) [m/s^2]."""
+# the cached kernels embed the code of every kernel they call
+drop_stale_cache(__file__, [m.__file__ for m in (banded, forces, geometry, L, stepper, observe)])
 
 # --- task constants tp ------------------------------------------------------------------------
 SWIM, INCH = 0, 1
@@ -66,28 +70,79 @@ METRIC_KEYS = ("average_speed", "distance", "displacement", "duration", "cost_of
 ``energy_friction``)."""
 
 
-def allocate_task(N: int, n_act: int, n_obs: int, batch: tuple[int, ...] = ()) -> dict[str, np.ndarray]:
-    """The task arrays of ``batch`` robots of N nodes (see the module docstring)."""
-    return {
-        "tp": np.zeros(batch + (N_TP,)),
-        "rs": np.zeros(batch + (N_RS,)),
-        "act": np.zeros(batch + (n_act,)),
-        "uk": np.zeros(batch + (N - 2,)),
-        "ul": np.zeros(batch + (N - 1,)),
-        "w": np.zeros(batch + (N,)),
-        "low": np.zeros(batch + (n_obs,)),
-        "high": np.zeros(batch + (n_obs,)),
-        "raw": np.zeros(batch + (n_obs,)),
-        "obs": np.zeros(batch + (n_obs,), dtype=np.float32),
-    }
+class TaskArrays(NamedTuple):
+    """The task's arrays of one robot (or of ``n``, stacked on a leading axis), as the task
+    kernels take them.
+
+    Attributes:
+        tp: the task's constants at ``T_*`` (kind, action scale and bounds, control step, goal,
+            reward weights, total mass), (N_TP,).
+        rs: the task's state and the last step's results at ``R_*`` (status, centre of mass,
+            heading, powers, forward speed, reward terms, reward) and the running episode
+            metrics at ``M_*`` (docs/model.md §8), (N_RS,); read them by name with
+            :func:`reward_terms` and :func:`episode_metrics`.
+        act: the action, clipped in place, (n_act,) [-].
+        uk: curvature rates, (N-2,) [1/s].
+        ul: rest-length rates, (N-1,) [m/s].
+        w: mass fractions of the nodes, (N,) [-].
+        low, high: bounds of the observation, (n_obs,).
+        raw: the observation unclipped, float64, (n_obs,).
+        obs: the observation, float32, (n_obs,).
+    """
+
+    tp: np.ndarray
+    rs: np.ndarray
+    act: np.ndarray
+    uk: np.ndarray
+    ul: np.ndarray
+    w: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    raw: np.ndarray
+    obs: np.ndarray
+
+    def row(self, i: int) -> TaskArrays:
+        """Robot ``i`` of stacked arrays: views, so writes go to the batch."""
+        return TaskArrays(*(a[i] for a in self))
+
+
+def allocate_task(N: int, n_act: int, n_obs: int, batch: tuple[int, ...] = ()) -> TaskArrays:
+    """Zeroed :class:`TaskArrays` of ``batch`` robots of N nodes."""
+    return TaskArrays(
+        tp=np.zeros(batch + (N_TP,)),
+        rs=np.zeros(batch + (N_RS,)),
+        act=np.zeros(batch + (n_act,)),
+        uk=np.zeros(batch + (N - 2,)),
+        ul=np.zeros(batch + (N - 1,)),
+        w=np.zeros(batch + (N,)),
+        low=np.zeros(batch + (n_obs,)),
+        high=np.zeros(batch + (n_obs,)),
+        raw=np.zeros(batch + (n_obs,)),
+        obs=np.zeros(batch + (n_obs,), dtype=np.float32),
+    )
+
+
+def reward_terms(r: Any) -> dict[str, Any]:
+    """The forward speed [m/s] and the reward terms of the last step, by name, from ``rs``
+    (a list for one robot, or ``rs.T``, rows over robots, for a batch)."""
+    terms = {"forward_speed": r[R_FWD]}
+    terms.update(zip(TERM_KEYS, r[R_RF : R_RFAIL + 1], strict=True))
+    return terms
+
+
+def episode_metrics(r: Any, keys: tuple[str, ...]) -> dict[str, Any]:
+    """The running episode metrics (docs/model.md §8) by name, from ``rs`` as for
+    :func:`reward_terms`; ``keys`` are :data:`METRIC_KEYS` with the medium's energy named."""
+    return dict(zip(keys, r[M_AVG:], strict=True))
 
 
 @njit(cache=True, error_model="numpy")
-def _observe(q, v, kbar, lbar, prm, ibuf, w, tp, low, high, raw, obs):
-    if int(tp[T_KIND]) == SWIM:
-        return observe.swim_observation(q, v, kbar, w, tp[T_GOAL], low, high, raw, obs)
-    ground = int(prm[K.P_MEDIUM]) == K.MEDIUM_GROUND
-    return observe.inch_observation(q, v, lbar, ibuf[K.I_FRICTION], ground, w, low, high, raw, obs)
+def _observe(s, t):
+    if int(t.tp[T_KIND]) == SWIM:
+        return observe.swim_observation(s.q, s.v, s.kbar, t.w, t.tp[T_GOAL], t.low, t.high, t.raw, t.obs)
+    ground = int(s.prm[L.P_MEDIUM]) == L.MEDIUM_GROUND
+    return observe.inch_observation(s.q, s.v, s.lbar, s.ibuf[L.I_FRICTION], ground, t.w, t.low, t.high,
+                                    t.raw, t.obs)
 
 
 @njit(cache=True, error_model="numpy")
@@ -107,40 +162,48 @@ def _metrics(out, prm, tp, rs):
     dx = rs[R_COMX] - rs[R_COM0X]
     dy = rs[R_COMY] - rs[R_COM0Y]
     distance = dx * tp[T_GCOS] + dy * tp[T_GSIN]
-    duration = out[K.O_NSTEPS] * prm[K.P_H]
-    ground = int(prm[K.P_MEDIUM]) == K.MEDIUM_GROUND
+    duration = out[L.O_NSTEPS] * prm[L.P_H]
+    ground = int(prm[L.P_MEDIUM]) == L.MEDIUM_GROUND
     rs[M_AVG] = distance / duration if duration > 0.0 else 0.0
     rs[M_DIST] = distance
     rs[M_DISP] = math.hypot(dx, dy)
     rs[M_DUR] = duration
-    rs[M_COT] = out[K.O_E_ACT] / (tp[T_MASS] * G * distance) if distance > 0.0 else math.inf
-    rs[M_EMED] = out[K.O_E_FRICTION] if ground else out[K.O_E_FLUID]
-    rs[M_EACT] = out[K.O_E_ACT]
-    rs[M_WACT] = out[K.O_W_ACT]
+    rs[M_COT] = out[L.O_E_ACT] / (tp[T_MASS] * prm[L.P_G] * distance) if distance > 0.0 else math.inf
+    rs[M_EMED] = out[L.O_E_FRICTION] if ground else out[L.O_E_FLUID]
+    rs[M_EACT] = out[L.O_E_ACT]
+    rs[M_WACT] = out[L.O_W_ACT]
 
 
 @njit(cache=True, error_model="numpy")
-def robot_reset(q, v, kbar, lbar, prm, ibuf, out, w, tp, low, high, raw, obs, rs):
-    """After the simulator's reset: the episode starts here (centre of mass, zero powers and
-    rewards, metrics, observation)."""
+def robot_reset(s, t):
+    """After the simulator's reset of ``s`` (:class:`~soft_snake_gym.physics.SimArrays`): the
+    episode of ``t`` (:class:`TaskArrays`) starts here (centre of mass, zero powers and rewards,
+    metrics, observation)."""
+    s, t = SimArrays(*s), TaskArrays(*t)
+    rs = t.rs
     rs[:] = 0.0
-    x, y = _com(q, w)
+    x, y = _com(s.q, t.w)
     rs[R_COMX] = rs[R_COM0X] = x
     rs[R_COMY] = rs[R_COM0Y] = y
-    _metrics(out, prm, tp, rs)
-    rs[R_HEADING] = _observe(q, v, kbar, lbar, prm, ibuf, w, tp, low, high, raw, obs)
+    _metrics(s.out, s.prm, t.tp, rs)
+    rs[R_HEADING] = _observe(s, t)
 
 
 @njit(cache=True, error_model="numpy")
-def robot_step(act, q, v, kbar, lbar, prm, buf, J, ibuf, out, uk, ul, w, tp, low, high, raw, obs, rs):
-    """One control step of one robot. Returns the status (``K.OK``, a failure code, or
-    :data:`BAD_ACTION` if ``act`` has a non-finite entry, in which case nothing changes).
+def robot_step(s, t):
+    """One control step of one robot, its simulator's arrays ``s``
+    (:class:`~soft_snake_gym.physics.SimArrays`) and its task's ``t`` (:class:`TaskArrays`,
+    with the action in ``t.act``). Returns the status (``OK``, a failure code, or
+    :data:`BAD_ACTION` if the action has a non-finite entry, in which case nothing changes).
 
     Clips ``act`` to [-1, 1] and turns it into rates (curvature rates for a swimmer, length
     rates for an inchworm) cut at the rest-shape bounds; advances ``tp[T_NSUB]`` integrator
     steps; on success updates the centre of mass, powers, observation and metrics. On a failure
     they keep their last valid values. The reward terms and the reward are written either way.
     """
+    s, t = SimArrays(*s), TaskArrays(*t)
+    q, kbar, lbar, prm, out = s.q, s.kbar, s.lbar, s.prm, s.out
+    act, tp, rs, uk, ul, w = t.act, t.tp, t.rs, t.uk, t.ul, t.w
     dt = tp[T_DT]
     if int(tp[T_KIND]) == SWIM:
         sq = observe.scale_rates(act, tp[T_SCALE], kbar, tp[T_LO], tp[T_HI], dt, uk)
@@ -148,31 +211,31 @@ def robot_step(act, q, v, kbar, lbar, prm, buf, J, ibuf, out, uk, ul, w, tp, low
         sq = observe.scale_rates(act, tp[T_SCALE], lbar, tp[T_LO], tp[T_HI], dt, ul)
     if sq != sq:
         return BAD_ACTION
-    ground = int(prm[K.P_MEDIUM]) == K.MEDIUM_GROUND
-    e_act0 = out[K.O_E_ACT]
-    w_act0 = out[K.O_W_ACT]
-    e_med0 = out[K.O_E_FRICTION] if ground else out[K.O_E_FLUID]
+    ground = int(prm[L.P_MEDIUM]) == L.MEDIUM_GROUND
+    e_act0 = out[L.O_E_ACT]
+    w_act0 = out[L.O_W_ACT]
+    e_med0 = out[L.O_E_FRICTION] if ground else out[L.O_E_FLUID]
     nsub = int(tp[T_NSUB])
-    status = K.simulate(q, v, kbar, lbar, uk, ul, prm, buf, J, ibuf, out, nsub)
+    status = stepper.simulate(s, uk, ul, nsub)
     rs[R_STATUS] = status
     rs[R_ASQ] = sq
-    if status == K.OK:
+    if status == L.OK:
         x, y = _com(q, w)
         fwd = ((x - rs[R_COMX]) * tp[T_GCOS] + (y - rs[R_COMY]) * tp[T_GSIN]) / dt
-        d_med = (out[K.O_E_FRICTION] if ground else out[K.O_E_FLUID]) - e_med0
+        d_med = (out[L.O_E_FRICTION] if ground else out[L.O_E_FLUID]) - e_med0
         if int(tp[T_ESRC]) == ENERGY_MEDIUM:
             epow = d_med / dt
         else:
-            epow = (out[K.O_E_ACT] - e_act0) / dt
+            epow = (out[L.O_E_ACT] - e_act0) / dt
         if nsub == 1:  # the simulator's own figures for its one step
-            rs[R_P_ACT] = out[K.O_P_ACT]
-            rs[R_P_MED] = out[K.O_P_FRICTION] if ground else out[K.O_P_FLUID]
+            rs[R_P_ACT] = out[L.O_P_ACT]
+            rs[R_P_MED] = out[L.O_P_FRICTION] if ground else out[L.O_P_FLUID]
         else:  # averages over the control step
-            rs[R_P_ACT] = (out[K.O_W_ACT] - w_act0) / dt
+            rs[R_P_ACT] = (out[L.O_W_ACT] - w_act0) / dt
             rs[R_P_MED] = d_med / dt
         rs[R_COMX] = x
         rs[R_COMY] = y
-        rs[R_HEADING] = _observe(q, v, kbar, lbar, prm, ibuf, w, tp, low, high, raw, obs)
+        rs[R_HEADING] = _observe(s, t)
         _metrics(out, prm, tp, rs)
     else:
         fwd = 0.0
@@ -182,29 +245,38 @@ def robot_step(act, q, v, kbar, lbar, prm, buf, J, ibuf, out, uk, ul, w, tp, low
     rs[R_RF] = tp[T_WF] * fwd
     rs[R_RE] = -tp[T_WE] * epow
     rs[R_RC] = -tp[T_WC] * sq
-    rs[R_RFAIL] = -tp[T_FAIL] if status != K.OK else 0.0
+    rs[R_RFAIL] = -tp[T_FAIL] if status != L.OK else 0.0
     rs[R_REWARD] = rs[R_RF] + rs[R_RE] + rs[R_RC] + rs[R_RFAIL]
     return status
 
 
+@njit(cache=True, error_model="numpy")
+def _robot(s, t, i):
+    """Robot ``i``'s views of stacked simulator and task arrays."""
+    return (
+        SimArrays(s.q[i], s.v[i], s.kbar[i], s.lbar[i], s.prm[i], s.buf[i], s.J[i], s.ibuf[i], s.out[i]),
+        TaskArrays(t.tp[i], t.rs[i], t.act[i], t.uk[i], t.ul[i], t.w[i], t.low[i], t.high[i], t.raw[i],
+                   t.obs[i]),
+    )
+
+
 @njit(cache=True, parallel=True, error_model="numpy")
-def batch_step(active, act, q, v, kbar, lbar, prm, buf, J, ibuf, out, uk, ul, w, tp, low, high,
-               raw, obs, rs, status):
-    """:func:`robot_step` for every robot ``i`` with ``active[i]`` (arrays stacked on a leading
-    robot axis), spread over numba's threads; robot ``i``'s status into ``status[i]``."""
-    for i in prange(q.shape[0]):
+def batch_step(active, s, t, status):
+    """:func:`robot_step` for every robot ``i`` with ``active[i]``, of stacked simulator arrays
+    ``s`` and task arrays ``t`` (leading robot axis), spread over numba's threads; robot ``i``'s
+    status into ``status[i]``."""
+    s, t = SimArrays(*s), TaskArrays(*t)
+    for i in prange(status.size):
         if active[i]:
-            status[i] = robot_step(act[i], q[i], v[i], kbar[i], lbar[i], prm[i], buf[i], J[i],
-                                   ibuf[i], out[i], uk[i], ul[i], w[i], tp[i], low[i], high[i],
-                                   raw[i], obs[i], rs[i])
+            si, ti = _robot(s, t, i)
+            status[i] = robot_step(si, ti)
 
 
 @njit(cache=True, error_model="numpy")
-def batch_step_serial(active, act, q, v, kbar, lbar, prm, buf, J, ibuf, out, uk, ul, w, tp, low, high,
-                      raw, obs, rs, status):
+def batch_step_serial(active, s, t, status):
     """:func:`batch_step` on the calling thread alone (no thread-pool launch: for one thread)."""
-    for i in range(q.shape[0]):
+    s, t = SimArrays(*s), TaskArrays(*t)
+    for i in range(status.size):
         if active[i]:
-            status[i] = robot_step(act[i], q[i], v[i], kbar[i], lbar[i], prm[i], buf[i], J[i],
-                                   ibuf[i], out[i], uk[i], ul[i], w[i], tp[i], low[i], high[i],
-                                   raw[i], obs[i], rs[i])
+            si, ti = _robot(s, t, i)
+            status[i] = robot_step(si, ti)

@@ -4,11 +4,12 @@
 picks a registered ``vector_entry_point`` when ``vectorization_mode`` is not given; pass
 ``vectorization_mode="sync"`` for a ``SyncVectorEnv`` of single envs instead).
 
-Design: the robots' physics and task arrays are stacked along a leading robot axis
-(:class:`~soft_snake_gym.physics.batch.BatchSimulator` for the physics,
-:func:`~soft_snake_gym.envs.task.allocate_task` for the task); each robot also has an ordinary
-:class:`~soft_snake_gym.envs.SwimEnv`/:class:`~soft_snake_gym.envs.InchEnv` object over views
-of those arrays. A step runs :func:`~soft_snake_gym.envs.task.batch_step`, a ``prange`` loop of
+Design: the robots' physics and task arrays are stacked along a leading robot axis (a
+:class:`RobotBatch`: :class:`~soft_snake_gym.physics.SimArrays` and
+:class:`~soft_snake_gym.envs.task.TaskArrays` with a leading axis, and one
+:class:`~soft_snake_gym.physics.Simulator` per robot over views of them); each robot also has
+an ordinary :class:`~soft_snake_gym.envs.SwimEnv`/:class:`~soft_snake_gym.envs.InchEnv` object
+over views of those arrays. A step runs :func:`~soft_snake_gym.envs.task.batch_step`, a ``prange`` loop of
 the very kernel a single env's ``step`` calls; a reset calls that robot's env object's
 ``reset`` (seeded noise, randomization draws), so robot ``i`` seeded ``s + i`` is bitwise the
 robot of ``gym.make(env_id)`` seeded ``s + i`` under the same actions, for any thread count.
@@ -17,6 +18,7 @@ robot of ``gym.make(env_id)`` seeded ``s + i`` under the same actions, for any t
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numba
@@ -30,11 +32,21 @@ from soft_snake_gym.envs.base import SoftRobotEnv, resolve_settings
 from soft_snake_gym.envs.inch import InchEnv
 from soft_snake_gym.envs.registration import MAX_EPISODE_STEPS
 from soft_snake_gym.envs.swim import SwimEnv
-from soft_snake_gym.params import SimConfig
-from soft_snake_gym.physics import kernels as K
-from soft_snake_gym.physics.batch import BatchSimulator
+from soft_snake_gym.envs.task import TaskArrays
+from soft_snake_gym.params import SimConfig, check_int
+from soft_snake_gym.physics import SimArrays, Simulator, allocate_arrays
+from soft_snake_gym.physics.layout import (
+    LEDGER_KEYS,
+    N_LEDGER,
+    O_LEDGER,
+    O_NITER,
+    O_NSTEPS,
+    OK,
+    P_H,
+    STATUS_REASONS,
+)
 
-__all__ = ["SoftVectorEnv", "SwimVectorEnv", "InchVectorEnv", "ENV_CLASSES"]
+__all__ = ["RobotBatch", "SoftVectorEnv", "SwimVectorEnv", "InchVectorEnv", "ENV_CLASSES"]
 
 ENV_CLASSES: dict[str, type[SoftRobotEnv]] = {"SoftEel-v0": SwimEnv, "SoftWorm-v0": InchEnv}
 
@@ -42,10 +54,25 @@ ROBOTS_PER_THREAD = 64
 """Default threads: one per this many robots, at most ``NUMBA_NUM_THREADS``."""
 
 
-def _positive_int(name: str, value: Any, hint: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"{name} = {value!r}: need an integer >= 1 ({hint})")
-    return int(value)
+@dataclass(frozen=True)
+class RobotBatch:
+    """The arrays of ``n`` robots stacked on a leading axis, as the batched step takes them.
+
+    Attributes:
+        sim: the simulators' arrays, :class:`~soft_snake_gym.physics.SimArrays` of shapes
+            (n, 2N), (n, 2N), (n, N-2), (n, N-1), ... .
+        task: the task's arrays, :class:`~soft_snake_gym.envs.task.TaskArrays` of shapes (n, ...).
+        sims: robot ``i`` as a :class:`~soft_snake_gym.physics.Simulator` over ``sim.row(i)``.
+    """
+
+    sim: SimArrays
+    task: TaskArrays
+    sims: tuple[Simulator, ...]
+
+    @property
+    def time(self) -> np.ndarray:
+        """Simulated time of each robot, as :attr:`Simulator.time`, (n,) [s]."""
+        return self.sim.out[:, O_NSTEPS] * self.sim.prm[:, P_H]
 
 
 class SoftVectorEnv(VectorEnv):
@@ -101,19 +128,14 @@ class SoftVectorEnv(VectorEnv):
             raise ValueError(f"env_id = {env_id!r} has no batched version; use one of {list(ENV_CLASSES)}")
         self.env_id = env_id
         env_cls = ENV_CLASSES[env_id]
-        n = _positive_int("num_envs", num_envs, "the number of robots")
+        n = check_int("num_envs", num_envs, 1, hint="the number of robots")
         if max_episode_steps is not None:
-            max_episode_steps = _positive_int("max_episode_steps", max_episode_steps,
-                                              "or None for no time limit")
+            max_episode_steps = check_int("max_episode_steps", max_episode_steps, 1,
+                                          hint="or None for no time limit")
         max_threads = numba.config.NUMBA_NUM_THREADS
-        if num_threads is not None and (
-            isinstance(num_threads, bool) or not isinstance(num_threads, (int, np.integer))
-            or not 1 <= num_threads <= max_threads
-        ):
-            raise ValueError(
-                f"num_threads = {num_threads!r}: need an integer in [1, {max_threads}] "
-                f"(NUMBA_NUM_THREADS = {max_threads}), or None for all"
-            )
+        if num_threads is not None:
+            num_threads = check_int("num_threads", num_threads, 1, max_threads,
+                                    hint=f"NUMBA_NUM_THREADS = {max_threads}; or None for the default")
         try:
             mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -138,14 +160,15 @@ class SoftVectorEnv(VectorEnv):
                                 ground=settings.ground, integrator=settings.integrator)
         if num_threads is None:  # a thread pays for its wake-up only with enough robots to share
             num_threads = min(max_threads, max(1, n // ROBOTS_PER_THREAD))
-        self.batch = BatchSimulator(base_config, n, num_threads=num_threads)
-        self.num_threads = self.batch.num_threads
-        proto = env_cls._over_arrays(settings, self.batch.sims[0], None)
+        self.num_threads = int(num_threads)
+        sim_arrays = allocate_arrays(base_config.rod.N, (n,))
+        sims = tuple(Simulator(base_config, arrays=sim_arrays.row(i)) for i in range(n))
+        proto = env_cls.over_arrays(settings, sims[0], None)
         n_act, n_obs = proto.action_space.shape[0], proto.observation_space.shape[0]
-        self._task = T.allocate_task(proto.N, n_act, n_obs, (n,))
+        self.batch = RobotBatch(sim=sim_arrays, task=T.allocate_task(proto.N, n_act, n_obs, (n,)), sims=sims)
+        """The robots' stacked arrays (:class:`RobotBatch`); read-only for users."""
         self.envs: list[SoftRobotEnv] = [
-            env_cls._over_arrays(settings, sim, {k: a[i] for k, a in self._task.items()})
-            for i, sim in enumerate(self.batch.sims)
+            env_cls.over_arrays(settings, sim, self.batch.task.row(i)) for i, sim in enumerate(sims)
         ]
         self.settings = settings
         self.N = proto.N
@@ -156,17 +179,11 @@ class SoftVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, n)
         self.action_space = batch_space(self.single_action_space, n)
         self.metadata = {"autoreset_mode": mode, "render_modes": [], "render_fps": proto.metadata["render_fps"]}
-        self._medium_power_key = "friction_power" if env_cls.medium == "ground" else "fluid_power"
-        self._metric_keys = proto._metric_keys
+        self.metric_keys = proto.metric_keys
+        """Names of the running episode metrics in ``info["metrics"]``."""
+        self._proto = proto  # builds the infos, as each robot's env does
         self._act_shape = (n, n_act)
-
-        t = self._task
-        self._step_args = (t["act"], *self.batch._arrays, t["uk"], t["ul"], t["w"], t["tp"],
-                           t["low"], t["high"], t["raw"], t["obs"], t["rs"])
-        self._rs, self._raw, self._obs = t["rs"], t["raw"], t["obs"]
-        self._out, self._shape = self.batch._arrays[8], self.batch.kbar if env_id == "SoftEel-v0" else self.batch.lbar
-        self._info_cols = np.array([T.R_COMX, T.R_COMY, T.R_HEADING, T.R_P_MED, T.R_P_ACT, T.R_FWD, T.R_RF,
-                                    T.R_RE, T.R_RC, T.R_RFAIL, *range(T.M_AVG, T.N_RS)])
+        self._shape = getattr(self.batch.sim, proto.shape_key)  # the driven rest shape, (n, N-2) or (n, N-1)
         self._status = np.zeros(n, dtype=np.int64)
         self._autoreset = np.zeros(n, dtype=np.bool_)
         self._all = np.ones(n, dtype=np.bool_)
@@ -189,10 +206,8 @@ class SoftVectorEnv(VectorEnv):
                 raise ValueError(
                     f"seed has {len(seeds)} entries for {self.num_envs} robots; give one per robot or one int"
                 )
-        reset_infos = [self._reset_robot(i, seeds[i], options) for i in range(self.num_envs)]
-        self._autoreset[:] = False
-        self._needs_reset = False
-        return self._obs.copy(), self._infos(np.zeros(self.num_envs, dtype=np.bool_), self._all, reset_infos)
+        reset_infos = self.reset_robots(seeds, [options] * self.num_envs)
+        return self.obs.copy(), self.infos(np.zeros(self.num_envs, dtype=np.bool_), self._all, reset_infos)
 
     def step(self, actions):
         """Step every robot (in ``NEXT_STEP`` mode, reset those whose episode ended last step)."""
@@ -203,35 +218,56 @@ class SoftVectorEnv(VectorEnv):
         same_step = self.autoreset_mode == AutoresetMode.SAME_STEP
         resetting = none if same_step else self._autoreset
         stepping = ~resetting
-        terminated, truncated = self._advance(actions, stepping)
-        rewards = np.where(stepping, self._rs[:, T.R_REWARD], 0.0)
+        terminated, truncated = self.advance(actions, stepping)
+        rewards = np.where(stepping, self.rewards, 0.0)
         dones = terminated | truncated
         any_done = bool(dones.any())
-        stats = self._episode_stats(dones) if any_done else None
+        stats = self.episode_stats(dones) if any_done else None
         infos: dict[str, Any] = {}
         if same_step and any_done:
             final_obs = np.full(n, None, dtype=object)
             for i in np.flatnonzero(dones):
-                final_obs[i] = self._obs[i].copy()
+                final_obs[i] = self.obs[i].copy()
             infos["final_obs"], infos["_final_obs"] = final_obs, dones.copy()
-            infos["final_info"], infos["_final_info"] = self._infos(dones, none, []), dones.copy()
+            infos["final_info"], infos["_final_info"] = self.infos(dones, none, []), dones.copy()
             resetting, stepping = dones, ~dones
-        reset_infos = [self._reset_robot(i) for i in np.flatnonzero(resetting)]
-        infos.update(self._infos(stepping, resetting, reset_infos))
+        reset_infos = [self.reset_robot(i) for i in np.flatnonzero(resetting)]
+        infos.update(self.infos(stepping, resetting, reset_infos))
         if stats is not None:
             infos["episode"], infos["_episode"] = stats, dones.copy()
         self._autoreset = none if same_step else dones
-        return self._obs.copy(), rewards, terminated, truncated, infos
+        return self.obs.copy(), rewards, terminated, truncated, infos
 
     def close_extras(self, **kwargs: Any) -> None:
         for env in self.envs:
             env.close()
 
-    # --- the engine, shared with the SB3 adapter -----------------------------------------------
-    def _advance(self, actions, stepping: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Step the robots in ``stepping`` by ``actions`` (n, n_act); update episode counters.
-        Returns (terminated, truncated), False for robots not stepped."""
-        act = self._task["act"]
+    # --- the engine, shared with the SB3 adapter (soft_snake_gym.sb3) ---------------------------
+    @property
+    def obs(self) -> np.ndarray:
+        """The robots' current observations, (n, n_obs) float32: the batch's buffer, which the
+        next step overwrites (copy to keep)."""
+        return self.batch.task.obs
+
+    @property
+    def rewards(self) -> np.ndarray:
+        """The robots' rewards of the last step, (n,): a view of the batch's buffer."""
+        return self.batch.task.rs[:, T.R_REWARD]
+
+    @property
+    def needs_reset(self) -> bool:
+        """True until the first reset: stepping before it raises."""
+        return self._needs_reset
+
+    def advance(self, actions, stepping: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Step the robots in ``stepping`` (n,) bool by ``actions`` (n, n_act) in one compiled
+        call and update their episode counters; a robot whose step fails ends its episode
+        (its env's ``failure``). Resets nobody: see :meth:`reset_robot`.
+
+        Returns:
+            (terminated, truncated), (n,) bool each, False for robots not stepped.
+        """
+        act = self.batch.task.act
         if not (type(actions) is np.ndarray and actions.shape == self._act_shape and actions.dtype.kind == "f"):
             try:
                 actions = np.asarray(actions, dtype=np.float64)
@@ -250,23 +286,22 @@ class SoftVectorEnv(VectorEnv):
                 f"{self.env_id} vector env actions have non-finite entries for robots {bad[:8]}; "
                 "every entry must be a finite number in [-1, 1]"
             )
-        out = self._out
-        self._prev = (out[:, K.O_NSTEPS].copy(), out[:, K.O_NITER].copy(), self._shape.copy())
+        out = self.batch.sim.out
+        self._prev = (out[:, O_NSTEPS].copy(), out[:, O_NITER].copy(), self._shape.copy())
         status = self._status
-        status[:] = K.OK
+        status[:] = OK
         start = time.perf_counter()
         if self.num_threads == 1:
-            T.batch_step_serial(stepping, *self._step_args, status)
+            T.batch_step_serial(stepping, tuple(self.batch.sim), tuple(self.batch.task), status)
         else:
             numba.set_num_threads(self.num_threads)
-            T.batch_step(stepping, *self._step_args, status)
+            T.batch_step(stepping, tuple(self.batch.sim), tuple(self.batch.task), status)
         self.kernel_seconds += time.perf_counter() - start
-        terminated = status != K.OK
+        terminated = status != OK
         if terminated.any():
             for i in np.flatnonzero(terminated):
-                env = self.envs[i]
-                env._failure = env.sim.failure = K.STATUS_REASONS[status[i]]
-        rewards = self._rs[:, T.R_REWARD]
+                self.envs[i].fail(STATUS_REASONS[status[i]])
+        rewards = self.rewards
         if stepping.all():
             self._elapsed += 1
             self._returns += rewards
@@ -279,19 +314,30 @@ class SoftVectorEnv(VectorEnv):
             truncated = stepping & (self._elapsed >= self.max_episode_steps)
         return terminated, truncated
 
-    def _reset_robot(self, i: int, seed: int | None = None, options: dict[str, Any] | None = None) -> dict:
-        """Reset robot ``i`` through its env object; returns that env's reset info."""
+    def reset_robot(self, i: int, seed: int | None = None, options: dict[str, Any] | None = None) -> dict:
+        """Reset robot ``i`` through its env object and start its episode counters; returns
+        that env's reset info."""
         _, info = self.envs[i].reset(seed=seed, options=options)
         self._elapsed[i] = 0
         self._returns[i] = 0.0
         self._starts[i] = time.perf_counter()
         return info
 
-    def _time(self, nsteps: np.ndarray) -> np.ndarray:
-        """Simulated time of each robot from its step count, as :attr:`Simulator.time` [s]."""
-        return nsteps * self.batch._arrays[4][:, K.P_H]
+    def reset_robots(self, seeds: list[int | None], options: list[dict[str, Any] | None]) -> list[dict]:
+        """Reset every robot, robot ``i`` with ``seeds[i]`` and ``options[i]``; clears pending
+        autoresets. Returns the robots' reset infos."""
+        infos = [self.reset_robot(i, seeds[i], options[i]) for i in range(self.num_envs)]
+        self._autoreset[:] = False
+        self._needs_reset = False
+        return infos
 
-    def _episode_stats(self, dones: np.ndarray) -> dict[str, np.ndarray]:
+    def episode_metrics(self, i: int) -> dict[str, float]:
+        """Robot ``i``'s running episode metrics, as its env's ``info["metrics"]``."""
+        return T.episode_metrics(self.batch.task.rs[i].tolist(), self.metric_keys)
+
+    def episode_stats(self, dones: np.ndarray) -> dict[str, np.ndarray]:
+        """``{"r", "l", "t"}`` (return, length, wall-clock seconds) of the episodes that end,
+        (n,) each, zero where ``dones`` is False (as ``RecordEpisodeStatistics``)."""
         now = time.perf_counter()
         return {
             "r": np.where(dones, self._returns, 0.0),
@@ -299,38 +345,27 @@ class SoftVectorEnv(VectorEnv):
             "t": np.where(dones, np.round(now - self._starts, 6), 0.0),
         }
 
-    def _infos(self, stepped: np.ndarray, reset: np.ndarray, reset_infos: list[dict]) -> dict[str, Any]:
+    def infos(self, stepped: np.ndarray, reset: np.ndarray, reset_infos: list[dict]) -> dict[str, Any]:
         """Infos of robots that ``stepped`` and were ``reset`` (``reset_infos`` in robot order),
-        with Gymnasium's ``_key`` masks, as ``SyncVectorEnv`` would gather the single envs'."""
+        with Gymnasium's ``_key`` masks, as ``SyncVectorEnv`` would gather the single envs'
+        (the entries are built by the same env methods)."""
         n = self.num_envs
         infos: dict[str, Any] = {}
         present = stepped | reset
         any_stepped = bool(stepped.any())
         if not present.any():
             return infos
-        rs, out = self._rs, self._out
-        cols = np.ascontiguousarray(rs[:, self._info_cols].T)  # one gather for every float key
-        nsteps, niter, shape = out[:, K.O_NSTEPS].copy(), out[:, K.O_NITER].copy(), self._shape.copy()
-        failed = stepped & (self._status != K.OK)
+        out = self.batch.sim.out
+        rows = self.batch.task.rs.T.copy()  # one gather: row k is rs[:, k] over robots
+        nsteps, niter, shape = out[:, O_NSTEPS].copy(), out[:, O_NITER].copy(), self._shape.copy()
+        failed = stepped & (self._status != OK)
         if failed.any():  # the last valid state, as the single env reports it
             prev_nsteps, prev_niter, prev_shape = self._prev
             nsteps[failed] = prev_nsteps[failed]
             niter[failed] = prev_niter[failed]
             shape[failed] = prev_shape[failed]
-        raw = self._raw
-        state = dict(zip(("x_position", "y_position", "heading"), cols[:3], strict=True))
-        state["time"] = self._time(nsteps)
-        state[self._medium_power_key] = cols[3]
-        state["actuator_power"] = cols[4]
-        if self.env_id == "SoftEel-v0":
-            state["kappa"] = raw[:, : self.N - 2].copy()
-            state["kbar"] = shape
-        else:
-            m = self.N - 1
-            state["edge_lengths"] = raw[:, :m].copy()
-            state["lbar"] = shape
-            state["stuck"] = raw[:, 3 * m : 4 * m + 1] > 0.5
-        state["newton_iterations"] = niter.astype(np.int64)
+        time_s = nsteps * self.batch.sim.prm[:, P_H]
+        state = self._proto.state_info(rows, time_s, shape, niter.astype(np.int64), self.batch.task.raw)
         all_present = bool(present.all())
         if not all_present:
             hidden = ~present
@@ -341,24 +376,23 @@ class SoftVectorEnv(VectorEnv):
             infos[key], infos[f"_{key}"] = value, mask
         failure = np.full(n, None, dtype=object)
         for i in np.flatnonzero(failed):
-            failure[i] = K.STATUS_REASONS[self._status[i]]
+            failure[i] = STATUS_REASONS[self._status[i]]
         infos["failure"], infos["_failure"] = failure, mask
         if any_stepped:
-            step_rows = cols[5:]
             if not stepped.all():
-                step_rows[:, ~stepped] = 0.0
+                rows[T.R_FWD :, ~stepped] = 0.0
             mask = stepped.copy()
-            for key, value in zip(("forward_speed", *T.TERM_KEYS), step_rows[:5], strict=True):
+            for key, value in T.reward_terms(rows).items():
                 infos[key], infos[f"_{key}"] = value, mask
             metrics: dict[str, Any] = {}
-            for key, value in zip(self._metric_keys, step_rows[5:], strict=True):
+            for key, value in T.episode_metrics(rows, self.metric_keys).items():
                 metrics[key], metrics[f"_{key}"] = value, mask
             infos["metrics"], infos["_metrics"] = metrics, mask
             energy: dict[str, Any] = {}
-            ledger = np.ascontiguousarray(out[:, K.O_LEDGER : K.O_LEDGER + K.N_LEDGER].T)
+            ledger = np.ascontiguousarray(out[:, O_LEDGER : O_LEDGER + N_LEDGER].T)
             if not stepped.all():
                 ledger[:, ~stepped] = 0.0
-            for key, value in zip(K.LEDGER_KEYS, ledger, strict=True):
+            for key, value in zip(LEDGER_KEYS, ledger, strict=True):
                 energy[key], energy[f"_{key}"] = value, mask
             infos["energy"], infos["_energy"] = energy, mask
         if reset.any():

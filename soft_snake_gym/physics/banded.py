@@ -67,6 +67,26 @@ def band_solve(J: np.ndarray, piv: np.ndarray, n: int, b: np.ndarray) -> None:
         b[k] = s / J[k, KL]
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def add_block(J, i, j, m00, m01, m10, m11):
+    """Add a 2x2 block to the band at node pair (i, j)."""
+    r = 2 * i
+    c = 2 * j - r + KL
+    J[r, c] += m00
+    J[r, c + 1] += m01
+    J[r + 1, c - 1] += m10
+    J[r + 1, c] += m11
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def add_edge_pattern(J, k, s00, s01, s11):
+    """Add the pattern [[-S, S], [S, -S]] of a symmetric 2x2 S to nodes (k, k+1)."""
+    add_block(J, k, k, -s00, -s01, -s01, -s11)
+    add_block(J, k, k + 1, s00, s01, s01, s11)
+    add_block(J, k + 1, k, s00, s01, s01, s11)
+    add_block(J, k + 1, k + 1, -s00, -s01, -s01, -s11)
+
+
 def band_to_dense(J: np.ndarray, n: int) -> np.ndarray:
     """The dense (n, n) matrix of an unfactored band (for tests and debugging)."""
     A = np.zeros((n, n))

@@ -7,10 +7,13 @@ import math
 import numpy as np
 
 from soft_snake_gym.params import SimConfig
-from soft_snake_gym.physics import kernels as K
-from soft_snake_gym.physics.banded import WIDTH
+from soft_snake_gym.physics import forces, geometry, stepper
+from soft_snake_gym.physics import layout as L
+from soft_snake_gym.physics.banded import WIDTH, band_to_dense
+from soft_snake_gym.physics.layout import SimArrays, allocate_arrays
 
 __all__ = [
+    "SimArrays",
     "Simulator",
     "SimulationError",
     "allocate_arrays",
@@ -19,9 +22,9 @@ __all__ = [
     "pack_params",
 ]
 
-_MEDIA = {"none": K.MEDIUM_NONE, "water": K.MEDIUM_WATER, "ground": K.MEDIUM_GROUND}
-_ADDED_MASS = {"consistent": K.ADDED_MASS_CONSISTENT, "kelasidi": K.ADDED_MASS_KELASIDI}
-_METHODS = {"backward_euler": K.METHOD_BACKWARD_EULER, "symplectic_euler": K.METHOD_SYMPLECTIC_EULER}
+_MEDIA = {"none": L.MEDIUM_NONE, "water": L.MEDIUM_WATER, "ground": L.MEDIUM_GROUND}
+_ADDED_MASS = {"consistent": L.ADDED_MASS_CONSISTENT, "kelasidi": L.ADDED_MASS_KELASIDI}
+_METHODS = {"backward_euler": L.METHOD_BACKWARD_EULER, "symplectic_euler": L.METHOD_SYMPLECTIC_EULER}
 
 
 class SimulationError(RuntimeError):
@@ -53,33 +56,33 @@ def auto_substeps(config: SimConfig) -> int:
 
 
 def pack_params(config: SimConfig, prm: np.ndarray) -> None:
-    """Write a config into the kernels' parameter vector ``prm`` (``K.N_PRM``,)."""
+    """Write a config into the kernels' parameter vector ``prm`` (``L.N_PRM``,)."""
     rod, fl, gr, it = config.rod, config.fluid, config.ground, config.integrator
-    prm[K.P_EA] = rod.EA
-    prm[K.P_EI] = rod.EI
-    prm[K.P_DBEND] = rod.damping_bend
-    prm[K.P_DSTRETCH] = rod.damping_stretch
-    prm[K.P_RHO] = fl.rho
-    prm[K.P_CF] = fl.C_f
-    prm[K.P_CD] = fl.C_D
-    prm[K.P_CA] = fl.C_A
-    prm[K.P_ADDED_MASS] = _ADDED_MASS[fl.added_mass]
-    prm[K.P_A] = rod.a
-    prm[K.P_B] = rod.b
-    prm[K.P_MUS] = gr.mu_s
-    prm[K.P_MUD] = gr.mu_d
-    prm[K.P_VTOL] = gr.V_tol
-    prm[K.P_G] = gr.g
-    prm[K.P_ANISO] = float(gr.anisotropic)
-    prm[K.P_MU_FWD], prm[K.P_MU_BWD], prm[K.P_MU_LAT] = gr.kinetic
-    prm[K.P_H] = it.h
-    prm[K.P_SUBSTEPS] = auto_substeps(config)
-    prm[K.P_TOL] = it.newton_tol
-    prm[K.P_MAXIT] = it.newton_max_iter
-    prm[K.P_MEDIUM] = _MEDIA[config.medium]
-    prm[K.P_METHOD] = _METHODS[it.method]
-    prm[K.P_MAXSTRAIN] = it.max_strain
-    prm[K.P_CHECKSI] = float(it.check_self_intersection)
+    prm[L.P_EA] = rod.EA
+    prm[L.P_EI] = rod.EI
+    prm[L.P_DBEND] = rod.damping_bend
+    prm[L.P_DSTRETCH] = rod.damping_stretch
+    prm[L.P_RHO] = fl.rho
+    prm[L.P_CF] = fl.C_f
+    prm[L.P_CD] = fl.C_D
+    prm[L.P_CA] = fl.C_A
+    prm[L.P_ADDED_MASS] = _ADDED_MASS[fl.added_mass]
+    prm[L.P_A] = rod.a
+    prm[L.P_B] = rod.b
+    prm[L.P_MUS] = gr.mu_s
+    prm[L.P_MUD] = gr.mu_d
+    prm[L.P_VTOL] = gr.V_tol
+    prm[L.P_G] = gr.g
+    prm[L.P_ANISO] = float(gr.anisotropic)
+    prm[L.P_MU_FWD], prm[L.P_MU_BWD], prm[L.P_MU_LAT] = gr.kinetic
+    prm[L.P_H] = it.h
+    prm[L.P_SUBSTEPS] = auto_substeps(config)
+    prm[L.P_TOL] = it.newton_tol
+    prm[L.P_MAXIT] = it.newton_max_iter
+    prm[L.P_MEDIUM] = _MEDIA[config.medium]
+    prm[L.P_METHOD] = _METHODS[it.method]
+    prm[L.P_MAXSTRAIN] = it.max_strain
+    prm[L.P_CHECKSI] = float(it.check_self_intersection)
 
 
 def body_from_curvature(
@@ -122,22 +125,6 @@ def body_from_curvature(
     return x - (w @ x) / w.sum() + np.asarray(com, dtype=float)
 
 
-def allocate_arrays(N: int, batch: tuple[int, ...] = ()) -> tuple[np.ndarray, ...]:
-    """The state, parameter, scratch and diagnostic arrays of ``batch`` robots of N nodes, in
-    the order the kernels take them: q, v, kbar, lbar, prm, buf, J, ibuf, out."""
-    return (
-        np.zeros(batch + (2 * N,)),
-        np.zeros(batch + (2 * N,)),
-        np.zeros(batch + (N - 2,)),
-        np.zeros(batch + (N - 1,)),
-        np.zeros(batch + (K.N_PRM,)),
-        np.zeros(batch + (K.N_BUF, 2 * N)),
-        np.zeros(batch + (2 * N, WIDTH)),
-        np.zeros(batch + (K.N_IBUF, 2 * N), dtype=np.int64),
-        np.zeros(batch + (K.N_OUT,)),
-    )
-
-
 def _as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
     arr = np.asarray(value, dtype=np.float64)
     if arr.shape != shape:
@@ -170,16 +157,24 @@ class Simulator:
         array([0.001, 0.001])
     """
 
-    def __init__(self, config: SimConfig | None = None, *, _arrays: tuple | None = None) -> None:
+    def __init__(self, config: SimConfig | None = None, *, arrays: SimArrays | None = None) -> None:
         config = SimConfig() if config is None else config
         if not isinstance(config, SimConfig):
             raise TypeError(f"config must be a SimConfig, got {type(config).__name__}")
         self.N = N = config.rod.N
-        if _arrays is None:
-            _arrays = allocate_arrays(N)
-        # views into a batch's stacked arrays when built by a BatchSimulator
-        (self._q, self._v, self._kbar, self._lbar, self._prm, self._buf, self._J, self._ibuf,
-         self._out) = _arrays
+        if arrays is None:
+            arrays = allocate_arrays(N)
+        elif not isinstance(arrays, SimArrays) or arrays.q.shape != (2 * N,):
+            got = f"SimArrays with q of shape {arrays.q.shape}" if isinstance(arrays, SimArrays) else type(arrays).__name__
+            raise ValueError(
+                f"arrays is {got}: need the SimArrays of one robot of N = {N} nodes, q of shape "
+                f"({2 * N},) (allocate_arrays({N}), or .row(i) of a batch's)"
+            )
+        self.arrays = arrays
+        """The kernels' arrays (:class:`~soft_snake_gym.physics.layout.SimArrays`): the state
+        ``q``, ``v`` (2N,), ``kbar``, ``lbar``, parameters, scratch and diagnostics ``out``.
+        Views of a batch's stacked arrays when the simulator is one robot of a batch. Read them
+        freely; write only through the simulator's methods."""
         self._zero_k = np.zeros(N - 2)
         self._zero_l = np.zeros(N - 1)
         self.failure: str | None = None
@@ -195,10 +190,10 @@ class Simulator:
                 "build a new Simulator to change the number of nodes"
             )
         self.config = config
-        pack_params(config, self._prm)
+        pack_params(config, self.arrays.prm)
         self._m = node_masses(config)
-        self._buf[K.B_M, 0::2] = self._m
-        self._buf[K.B_M, 1::2] = self._m
+        self.arrays.buf[L.B_M, 0::2] = self._m
+        self.arrays.buf[L.B_M, 1::2] = self._m
 
     @property
     def h(self) -> float:
@@ -208,22 +203,22 @@ class Simulator:
     @property
     def substeps(self) -> int:
         """Internal sub-steps per step."""
-        return int(self._prm[K.P_SUBSTEPS])
+        return int(self.arrays.prm[L.P_SUBSTEPS])
 
     def reset(self, x=None, v=None, kbar=None, lbar=None) -> None:
         """Start over: by default a straight body at rest along +x, centre of mass at the
         origin, rest shape straight with the configured edge length; clears accumulated
         energies, time and any failure."""
         rod = self.config.rod
-        self._kbar[:] = 0.0
-        self._lbar[:] = rod.edge_length
+        self.arrays.kbar[:] = 0.0
+        self.arrays.lbar[:] = rod.edge_length
         if x is None:
-            x = body_from_curvature(self._kbar if kbar is None else kbar,
-                                    self._lbar if lbar is None else lbar)
-        self._q[:] = 0.0
-        self._v[:] = 0.0
-        self._out[:] = 0.0
-        self._buf[K.B_FEXT] = 0.0
+            x = body_from_curvature(self.arrays.kbar if kbar is None else kbar,
+                                    self.arrays.lbar if lbar is None else lbar)
+        self.arrays.q[:] = 0.0
+        self.arrays.v[:] = 0.0
+        self.arrays.out[:] = 0.0
+        self.arrays.buf[L.B_FEXT] = 0.0
         self.set_state(x=x, v=v, kbar=kbar, lbar=lbar)
 
     def set_state(self, x=None, v=None, kbar=None, lbar=None) -> None:
@@ -242,33 +237,33 @@ class Simulator:
                     f"x puts nodes {np.flatnonzero(lengths <= 0).tolist()} on top of their "
                     "successors: every edge needs a positive length"
                 )
-            self._q[:] = new_x.ravel()
+            self.arrays.q[:] = new_x.ravel()
         if new_v is not None:
-            self._v[:] = new_v.ravel()
+            self.arrays.v[:] = new_v.ravel()
         if new_k is not None:
-            self._kbar[:] = new_k
+            self.arrays.kbar[:] = new_k
         if new_l is not None:
-            self._lbar[:] = new_l
-        self._ibuf[K.I_ORDER, : N - 1] = np.argsort(
-            np.minimum(self._q[0:-2:2], self._q[2::2]), kind="stable"
+            self.arrays.lbar[:] = new_l
+        self.arrays.ibuf[L.I_ORDER, : N - 1] = np.argsort(
+            np.minimum(self.arrays.q[0:-2:2], self.arrays.q[2::2]), kind="stable"
         )
-        self._ibuf[K.I_FRICTION] = K.SLIDING
-        self._buf[K.B_V0] = self._v  # the stepper's predictor starts from the current velocity
+        self.arrays.ibuf[L.I_FRICTION] = L.SLIDING
+        self.arrays.buf[L.B_V0] = self.arrays.v  # the stepper's predictor starts from the current velocity
         self.failure = None
         # the energy ledger starts here: energies now, work and dissipation accumulated so far
-        out = self._out
-        K.ledger_energies(self._q, self._v, self._kbar, self._lbar, self._prm, self._buf, out)
-        out[K.O_L0_KIN : K.O_L0_E_FRICTION + 1] = out[
-            [K.O_E_KIN, K.O_E_ELASTIC, K.O_T_FLUID, K.O_W_ACT, K.O_E_FLUID, K.O_E_DAMP, K.O_E_FRICTION]
+        out = self.arrays.out
+        stepper.ledger_energies(tuple(self.arrays))
+        out[L.O_L0_KIN : L.O_L0_E_FRICTION + 1] = out[
+            [L.O_E_KIN, L.O_E_ELASTIC, L.O_T_FLUID, L.O_W_ACT, L.O_E_FLUID, L.O_E_DAMP, L.O_E_FRICTION]
         ]
-        out[K.O_LEDGER : K.O_LEDGER + K.N_LEDGER] = 0.0
+        out[L.O_LEDGER : L.O_LEDGER + L.N_LEDGER] = 0.0
 
     def set_external_force(self, force=None) -> None:
         """Apply a constant external force to each node, (N, 2) [N]; ``None`` removes it."""
         if force is None:
-            self._buf[K.B_FEXT] = 0.0
+            self.arrays.buf[L.B_FEXT] = 0.0
         else:
-            self._buf[K.B_FEXT] = _as_array("force", force, (self.N, 2)).ravel()
+            self.arrays.buf[L.B_FEXT] = _as_array("force", force, (self.N, 2)).ravel()
 
     # --- stepping ------------------------------------------------------------------------
     def _inputs(self, u_k, u_l) -> tuple[np.ndarray, np.ndarray]:
@@ -303,10 +298,9 @@ class Simulator:
                 "call reset() or set_state() before stepping again"
             )
         uk, ul = self._inputs(u_k, u_l)
-        status = K.simulate(self._q, self._v, self._kbar, self._lbar, uk, ul, self._prm,
-                            self._buf, self._J, self._ibuf, self._out, n_steps)
-        if status != K.OK:
-            self.failure = K.STATUS_REASONS[status]
+        status = stepper.simulate(tuple(self.arrays), uk, ul, n_steps)  # a plain tuple: see layout
+        if status != L.OK:
+            self.failure = L.STATUS_REASONS[status]
             return False
         return True
 
@@ -314,65 +308,65 @@ class Simulator:
     @property
     def x(self) -> np.ndarray:
         """Node positions, (N, 2) [m] (a copy)."""
-        return self._q.reshape(self.N, 2).copy()
+        return self.arrays.q.reshape(self.N, 2).copy()
 
     @property
     def v(self) -> np.ndarray:
         """Node velocities, (N, 2) [m/s] (a copy)."""
-        return self._v.reshape(self.N, 2).copy()
+        return self.arrays.v.reshape(self.N, 2).copy()
 
     @property
     def kbar(self) -> np.ndarray:
         """Rest curvatures, (N-2,) [-] (a copy)."""
-        return self._kbar.copy()
+        return self.arrays.kbar.copy()
 
     @property
     def lbar(self) -> np.ndarray:
         """Rest lengths, (N-1,) [m] (a copy)."""
-        return self._lbar.copy()
+        return self.arrays.lbar.copy()
 
     @property
     def kappa(self) -> np.ndarray:
         """Curvatures ``2 tan(phi/2)`` of the interior nodes, (N-2,) [-]."""
         out = np.empty(self.N - 2)
-        K.curvatures(self._q, out)
+        geometry.curvatures(self.arrays.q, out)
         return out
 
     @property
     def kappa_dot(self) -> np.ndarray:
         """Exact curvature rates (docs/model.md §2), (N-2,) [1/s]."""
         out = np.empty(self.N - 2)
-        K.curvature_rates(self._q, self._v, out)
+        geometry.curvature_rates(self.arrays.q, self.arrays.v, out)
         return out
 
     @property
     def edge_lengths(self) -> np.ndarray:
         """Current edge lengths ``|e^k|``, (N-1,) [m]."""
         out = np.empty(self.N - 1)
-        K.edge_lengths(self._q, out)
+        geometry.edge_lengths(self.arrays.q, out)
         return out
 
     @property
     def edge_length_rates(self) -> np.ndarray:
         """Rates of the edge lengths, (N-1,) [m/s]."""
         out = np.empty(self.N - 1)
-        K.edge_length_rates(self._q, self._v, out)
+        geometry.edge_length_rates(self.arrays.q, self.arrays.v, out)
         return out
 
     @property
     def com(self) -> np.ndarray:
         """Centre of mass, (2,) [m]."""
-        return self._m @ self._q.reshape(self.N, 2) / self._m.sum()
+        return self._m @ self.arrays.q.reshape(self.N, 2) / self._m.sum()
 
     @property
     def com_velocity(self) -> np.ndarray:
         """Velocity of the centre of mass, (2,) [m/s]."""
-        return self._m @ self._v.reshape(self.N, 2) / self._m.sum()
+        return self._m @ self.arrays.v.reshape(self.N, 2) / self._m.sum()
 
     @property
     def heading(self) -> float:
         """Direction of the tail-to-head chord ``x[N-1] - x[0]`` [rad]."""
-        q = self._q
+        q = self.arrays.q
         return math.atan2(q[-1] - q[1], q[-2] - q[0])
 
     @property
@@ -385,22 +379,24 @@ class Simulator:
         """Which nodes stuck to the ground in the last step, (N,) bool (all False off ground)."""
         if self.config.medium != "ground":
             return np.zeros(self.N, dtype=bool)
-        return self._ibuf[K.I_FRICTION, : self.N] == K.STUCK
+        return self.arrays.ibuf[L.I_FRICTION, : self.N] == L.STUCK
 
     def elastic_energy(self) -> float:
         """Stretching plus bending energy [J]."""
-        return float(K.elastic_energy(self._q, self._kbar, self._lbar, self._prm))
+        a = self.arrays
+        return float(forces.elastic_energy(a.q, a.kbar, a.lbar, a.prm))
 
     def kinetic_energy(self) -> float:
         """Kinetic energy of the nodes (not of the entrained water) [J]."""
-        return float(0.5 * self._buf[K.B_M] @ (self._v * self._v))
+        return float(0.5 * self.arrays.buf[L.B_M] @ (self.arrays.v * self.arrays.v))
 
     def fluid_kinetic_energy(self) -> float:
         """Kinetic energy of the water moved with the body, ``T_f = sum_i 1/2 mu_n (v^i . n^i)^2``
         (docs/model.md §4; 0 out of water) [J]."""
         if self.config.medium != "water":
             return 0.0
-        return float(K.fluid_kinetic_energy(self._q, self._v, self._prm))
+        a = self.arrays
+        return float(forces.fluid_kinetic_energy(a.q, a.v, a.prm))
 
     def energy_ledger(self) -> dict[str, float]:
         """The energy balance since the last :meth:`reset` or :meth:`set_state` (docs/model.md §4):
@@ -413,29 +409,28 @@ class Simulator:
         the consistent added mass. Work of :meth:`set_external_force` forces is not counted
         (it shows up in ``error``).
         """
-        return dict(zip(K.LEDGER_KEYS, self._out[K.O_LEDGER : K.O_LEDGER + K.N_LEDGER].tolist(), strict=True))
+        return dict(zip(L.LEDGER_KEYS, self.arrays.out[L.O_LEDGER : L.O_LEDGER + L.N_LEDGER].tolist(), strict=True))
 
     def elastic_forces(self) -> np.ndarray:
         """Elastic plus damping forces on the nodes, (N, 2) [N]."""
         F = np.zeros(2 * self.N)
-        K.assemble(self._q, self._v, self._kbar, self._lbar, self._prm, F, self._J,
-                   0.0, 0.0, False, False)
+        a = self.arrays
+        forces.assemble(a.q, a.v, a.kbar, a.lbar, a.prm, F, a.J, 0.0, 0.0, False, False)
         return F.reshape(self.N, 2)
 
     def force_jacobians(self, water: bool | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Forces and their analytic Jacobians ``dF/dx`` and ``dF/dv`` as dense (2N, 2N)
         matrices in interleaved (x0, y0, x1, ...) order: elastic, damping and (in water)
         drag. For checking and analysis; the stepper uses the banded form."""
-        from soft_snake_gym.physics.banded import band_to_dense
-
         water = self.config.medium == "water" if water is None else water
+        a = self.arrays
         n = 2 * self.N
         F = np.zeros(n)
         mats = []
         for cx, cv in ((1.0, 0.0), (0.0, 1.0)):
             F[:] = 0.0
             J = np.zeros((n, WIDTH))
-            K.assemble(self._q, self._v, self._kbar, self._lbar, self._prm, F, J, cx, cv, True, water)
+            forces.assemble(a.q, a.v, a.kbar, a.lbar, a.prm, F, J, cx, cv, True, water)
             mats.append(band_to_dense(J, n))
         return F.copy(), mats[0], mats[1]
 
@@ -443,56 +438,56 @@ class Simulator:
     @property
     def time(self) -> float:
         """Simulated time since the last reset [s] (steps times h, so it does not drift)."""
-        return float(self._out[K.O_NSTEPS] * self.h)
+        return float(self.arrays.out[L.O_NSTEPS] * self.h)
 
     @property
     def newton_iterations(self) -> int:
         """Newton iterations of the last step (0 for the explicit integrator)."""
-        return int(self._out[K.O_NITER])
+        return int(self.arrays.out[L.O_NITER])
 
     @property
     def fluid_power(self) -> float:
         """Power lost to drag over the last step, ``-sum F_D . v >= 0`` [W]."""
-        return float(self._out[K.O_P_FLUID])
+        return float(self.arrays.out[L.O_P_FLUID])
 
     @property
     def friction_power(self) -> float:
         """Power lost to ground friction over the last step [W]."""
-        return float(self._out[K.O_P_FRICTION])
+        return float(self.arrays.out[L.O_P_FRICTION])
 
     @property
     def actuator_power(self) -> float:
         """Power of the inputs on the body over the last step (signed) [W]."""
-        return float(self._out[K.O_P_ACT])
+        return float(self.arrays.out[L.O_P_ACT])
 
     @property
     def fluid_energy(self) -> float:
         """Energy lost to drag since reset [J]."""
-        return float(self._out[K.O_E_FLUID])
+        return float(self.arrays.out[L.O_E_FLUID])
 
     @property
     def friction_work(self) -> float:
         """Work done against friction since reset [J]."""
-        return float(self._out[K.O_E_FRICTION])
+        return float(self.arrays.out[L.O_E_FRICTION])
 
     @property
     def actuator_energy(self) -> float:
         """Actuator energy since reset, the sum over steps of |work| [J] (a real actuator
         does not get back the work the body does on it)."""
-        return float(self._out[K.O_E_ACT])
+        return float(self.arrays.out[L.O_E_ACT])
 
     @property
     def damping_power(self) -> float:
         """Power lost to material damping over the last step,
         ``damping_bend sum kappa_dot^2 + damping_stretch sum ldot^2`` [W]."""
-        return float(self._out[K.O_P_DAMP])
+        return float(self.arrays.out[L.O_P_DAMP])
 
     @property
     def damping_energy(self) -> float:
         """Energy lost to material damping since reset [J]."""
-        return float(self._out[K.O_E_DAMP])
+        return float(self.arrays.out[L.O_E_DAMP])
 
     @property
     def actuator_work(self) -> float:
         """Signed actuator work since reset [J]."""
-        return float(self._out[K.O_W_ACT])
+        return float(self.arrays.out[L.O_W_ACT])

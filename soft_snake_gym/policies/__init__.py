@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from soft_snake_gym.config import ConfigError, config_path, from_dict, load_yaml, parse_assignments
+from soft_snake_gym.gaits import SerpenoidParams
 from soft_snake_gym.policies.base import (
     BaselinePolicy,
     EnvLayout,
@@ -20,7 +21,7 @@ from soft_snake_gym.policies.base import (
 )
 from soft_snake_gym.policies.decentralized import DecentralizedPhasePID
 from soft_snake_gym.policies.inching import InchingPID, InchingWave
-from soft_snake_gym.policies.open_loop import OpenLoopSerpenoid, SerpenoidParams
+from soft_snake_gym.policies.open_loop import OpenLoopSerpenoid
 from soft_snake_gym.policies.pid import CurvaturePID
 
 __all__ = [

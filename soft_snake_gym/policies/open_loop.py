@@ -3,50 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from soft_snake_gym.gaits import serpenoid, serpenoid_on_nodes, serpenoid_phase
+from soft_snake_gym.gaits import SerpenoidParams, serpenoid, serpenoid_on_nodes, serpenoid_phase
 from soft_snake_gym.policies.base import BaselinePolicy
 
 __all__ = ["OpenLoopParams", "OpenLoopSerpenoid", "SerpenoidParams"]
-
-
-@dataclass(frozen=True)
-class SerpenoidParams:
-    """Serpenoid gait (docs/model.md §6), thesis defaults.
-
-    Attributes:
-        alpha: amplitude of the turning angle [rad] (pi/6).
-        omega: temporal frequency [rad/s] (2 pi / 3).
-        delta: phase offset between neighbouring nodes [rad]; None: 2 pi / (N - 2), one
-            wave along the body (pi/4 for N = 10).
-        gamma: turning bias [rad] (0).
-        psi0: phase of the clock at t = 0 [rad] (0).
-
-    On a refined rod (``Rod.refined``), ``alpha``, ``delta`` and ``gamma`` are those of the
-    robot as designed and are mapped onto arc length: each node runs ``alpha l / l_d``,
-    ``delta l / l_d`` and ``gamma l / l_d`` (``soft_snake_gym.gaits.serpenoid_on_nodes``), so
-    that the body wave is the same whatever N. The controllers' gains need no scaling: every
-    term of their laws is a per-node turning angle (or its rate or integral), the continuous
-    curvature times the edge length, so the law divided by ``l`` is the same law on
-    curvatures per unit length with the same gains [1/s]; the saturation
-    ``1.5 alpha omega`` follows the mapped ``alpha``.
-    """
-
-    alpha: float = math.pi / 6
-    omega: float = 2 * math.pi / 3
-    delta: float | None = None
-    gamma: float = 0.0
-    psi0: float = 0.0
-
-    def __post_init__(self) -> None:
-        if not 0 <= self.alpha < math.pi:
-            raise ValueError(f"alpha = {self.alpha!r} rad must be in [0, pi)")
-        if not self.omega >= 0:
-            raise ValueError(f"omega = {self.omega!r} rad/s must be >= 0")
 
 
 class _SerpenoidPolicy(BaselinePolicy):

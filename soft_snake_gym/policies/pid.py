@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from soft_snake_gym.policies.open_loop import SerpenoidParams, _SerpenoidPolicy
+from soft_snake_gym.gaits import SerpenoidParams
+from soft_snake_gym.policies.open_loop import _SerpenoidPolicy
 
 __all__ = ["CurvaturePID", "PIDParams", "pid_law"]
 

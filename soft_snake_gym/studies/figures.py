@@ -14,8 +14,7 @@ import numpy as np
 from soft_snake_gym import plots
 from soft_snake_gym.agents import make_policy
 from soft_snake_gym.envs import register_envs
-from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-from soft_snake_gym.policies.open_loop import SerpenoidParams
+from soft_snake_gym.gaits import SerpenoidParams, serpenoid, serpenoid_phase
 from soft_snake_gym.studies.sweep import control_step
 
 __all__ = [

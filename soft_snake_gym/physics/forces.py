@@ -1,0 +1,421 @@
+"""Forces on the discrete rod and their Jacobians (docs/model.md §3-§5): elastic and damping
+forces, drag and added mass of the water, kinetic friction on the ground, and the powers and
+energies they give. Kernels on flat interleaved ``q``, ``v`` (2N,) and the parameter vector
+``prm`` (``P_*``); forces are added into their outputs, Jacobians into a band
+(:mod:`~soft_snake_gym.physics.banded`).
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from soft_snake_gym.physics import banded, geometry, layout
+from soft_snake_gym.physics.banded import KL, add_block, add_edge_pattern, band_lu, band_solve
+from soft_snake_gym.physics.cache import drop_stale_cache
+from soft_snake_gym.physics.geometry import edge_frame, node_tangent, turning
+from soft_snake_gym.physics.layout import (
+    P_A,
+    P_ANISO,
+    P_B,
+    P_CA,
+    P_CD,
+    P_CF,
+    P_DBEND,
+    P_DSTRETCH,
+    P_EA,
+    P_EI,
+    P_MU_BWD,
+    P_MU_FWD,
+    P_MU_LAT,
+    P_MUD,
+    P_RHO,
+)
+
+# the cached kernels embed the code of the kernels and constants they use from these files
+drop_stale_cache(__file__, [banded.__file__, geometry.__file__, layout.__file__])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def added_mass_coefficient(prm):
+    """``rho pi C_A a^2``, the added mass per length of the body across itself (docs/model.md §4):
+    an edge of length ``l`` entrains ``mu_n = rho pi C_A a^2 l`` [kg/m]."""
+    return prm[P_RHO] * math.pi * prm[P_CA] * prm[P_A] * prm[P_A]
+
+
+@njit(cache=True, error_model="numpy")
+def elastic_energy(q, kbar, lbar, prm):
+    """Stretching plus bending energy ``E_s + E_b`` (docs/model.md §3) [J]."""
+    N = q.size // 2
+    EA, EI = prm[P_EA], prm[P_EI]
+    e = 0.0
+    for k in range(N - 1):
+        l = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1])
+        s = l / lbar[k] - 1.0
+        e += 0.5 * EA * s * s * lbar[k]
+    for j in range(1, N - 1):
+        dk = turning(q, j)[0] - kbar[j - 1]
+        e += 0.5 * EI / (0.5 * (lbar[j - 1] + lbar[j])) * dk * dk
+    return e
+
+
+@njit(cache=True, error_model="numpy")
+def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
+    """Add internal (elastic, damping) and, if ``water``, drag forces into F (2N,) [N].
+
+    If ``jac``, also add ``cx dF/dq + cv dF/dv`` into the band ``J`` (exact, damping's
+    position dependence included: without it Newton needs a second iteration every step).
+    Returns the power lost to drag ``-sum F_D . v_edge`` [W].
+    """
+    N = q.size // 2
+    EA, EI, d, db = prm[P_EA], prm[P_EI], prm[P_DSTRETCH], prm[P_DBEND]
+    # stretching (docs/model.md §3): force on x[k+1] is -EA (|e|/lbar - 1) t
+    for k in range(N - 1):
+        ex = q[2 * k + 2] - q[2 * k]
+        ey = q[2 * k + 3] - q[2 * k + 1]
+        l = math.sqrt(ex * ex + ey * ey)
+        tx, ty = ex / l, ey / l
+        lb = lbar[k]
+        strain = l / lb - 1.0
+        f = -EA * strain
+        ldot = 0.0
+        if d > 0.0:
+            dvx, dvy = v[2 * k + 2] - v[2 * k], v[2 * k + 3] - v[2 * k + 1]
+            ldot = tx * dvx + ty * dvy
+            f -= d * ldot
+        F[2 * k + 2] += f * tx
+        F[2 * k + 3] += f * ty
+        F[2 * k] -= f * tx
+        F[2 * k + 1] -= f * ty
+        if jac:
+            # -dF_{k+1}/dx_{k+1} = EA t t^T / lbar - f/l (I - t t^T) + d t p^T, with the
+            # turning of the stretch rate p = d ldot / d x_{k+1} = (dv - ldot t) / l
+            a1 = EA / lb
+            a2 = -f / l
+            s00 = cx * (a1 * tx * tx + a2 * (1.0 - tx * tx)) + cv * d * tx * tx
+            s01 = cx * (a1 - a2) * tx * ty + cv * d * tx * ty
+            s11 = cx * (a1 * ty * ty + a2 * (1.0 - ty * ty)) + cv * d * ty * ty
+            add_edge_pattern(J, k, s00, s01, s11)
+            if d > 0.0:
+                px, py = cx * d * (dvx - ldot * tx) / l, cx * d * (dvy - ldot * ty) / l
+                t00, t01, t10, t11 = tx * px, tx * py, ty * px, ty * py
+                add_block(J, k, k, -t00, -t01, -t10, -t11)
+                add_block(J, k, k + 1, t00, t01, t10, t11)
+                add_block(J, k + 1, k, t00, t01, t10, t11)
+                add_block(J, k + 1, k + 1, -t00, -t01, -t10, -t11)
+    # bending (docs/model.md §3): F = -(EI/lvor)(kappa - kbar)(1 + kappa^2/4) d phi/d x
+    for j in range(1, N - 1):
+        kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = turning(q, j)
+        kb = EI / (0.5 * (lbar[j - 1] + lbar[j]))
+        dk = kap - kbar[j - 1]
+        w = 1.0 + 0.25 * kap * kap
+        s = kb * dk * w  # dE/dphi
+        phidot = 0.0
+        if db > 0.0:
+            phidot = (g0x * v[2 * j - 2] + g0y * v[2 * j - 1] + g1x * v[2 * j]
+                      + g1y * v[2 * j + 1] + g2x * v[2 * j + 2] + g2y * v[2 * j + 3])
+            s += db * w * w * phidot  # -d kappa_dot mapped through d kappa/d x
+        F[2 * j - 2] -= s * g0x
+        F[2 * j - 1] -= s * g0y
+        F[2 * j] -= s * g1x
+        F[2 * j + 1] -= s * g1y
+        F[2 * j + 2] -= s * g2x
+        F[2 * j + 3] -= s * g2y
+        if jac:
+            # d2E/dphi2 and the Hessians of the edge angles, H = -(t n^T + n t^T)/l^2
+            # damping s_d = db w^2 phidot adds d s_d/dx = db w^2 (kappa phidot g + r), with
+            # r = (d phidot / d x) = sum_b d2phi/dx dx_b v_b
+            s2 = kb * (w * w + dk * 0.5 * kap * w) + db * w * w * kap * phidot
+            alpha = -(cx * s2 + cv * db * w * w)
+            beta = -cx * (kb * dk * w + db * w * w * phidot)
+            ia = 1.0 / (la * la)
+            ib = 1.0 / (lbn * lbn)
+            ha00, ha01, ha11 = 2.0 * tax * tay * ia, (tay * tay - tax * tax) * ia, -2.0 * tax * tay * ia
+            hb00, hb01, hb11 = 2.0 * tbx * tby * ib, (tby * tby - tbx * tbx) * ib, -2.0 * tbx * tby * ib
+            if db > 0.0:
+                # r_{j-1} = Ha (v_j - v_{j-1}), r_{j+1} = Hb (v_{j+1} - v_j), r_j = -(the two)
+                ux, uy = v[2 * j] - v[2 * j - 2], v[2 * j + 1] - v[2 * j - 1]
+                wx, wy = v[2 * j + 2] - v[2 * j], v[2 * j + 3] - v[2 * j + 1]
+                r0x, r0y = ha00 * ux + ha01 * uy, ha01 * ux + ha11 * uy
+                r2x, r2y = hb00 * wx + hb01 * wy, hb01 * wx + hb11 * wy
+                r1x, r1y = -r0x - r2x, -r0y - r2y
+                c = -cx * db * w * w
+                for a, gx, gy in ((j - 1, g0x, g0y), (j, g1x, g1y), (j + 1, g2x, g2y)):
+                    add_block(J, a, j - 1, c * gx * r0x, c * gx * r0y, c * gy * r0x, c * gy * r0y)
+                    add_block(J, a, j, c * gx * r1x, c * gx * r1y, c * gy * r1x, c * gy * r1y)
+                    add_block(J, a, j + 1, c * gx * r2x, c * gx * r2y, c * gy * r2x, c * gy * r2y)
+            # d2phi blocks: (0,0) -Ha, (0,1) Ha, (1,1) Hb - Ha, (1,2) -Hb, (2,2) Hb
+            add_block(J, j - 1, j - 1, alpha * g0x * g0x - beta * ha00, alpha * g0x * g0y - beta * ha01,
+                       alpha * g0y * g0x - beta * ha01, alpha * g0y * g0y - beta * ha11)
+            add_block(J, j - 1, j, alpha * g0x * g1x + beta * ha00, alpha * g0x * g1y + beta * ha01,
+                       alpha * g0y * g1x + beta * ha01, alpha * g0y * g1y + beta * ha11)
+            add_block(J, j, j - 1, alpha * g1x * g0x + beta * ha00, alpha * g1x * g0y + beta * ha01,
+                       alpha * g1y * g0x + beta * ha01, alpha * g1y * g0y + beta * ha11)
+            add_block(J, j - 1, j + 1, alpha * g0x * g2x, alpha * g0x * g2y,
+                       alpha * g0y * g2x, alpha * g0y * g2y)
+            add_block(J, j + 1, j - 1, alpha * g2x * g0x, alpha * g2x * g0y,
+                       alpha * g2y * g0x, alpha * g2y * g0y)
+            add_block(J, j, j, alpha * g1x * g1x + beta * (hb00 - ha00),
+                       alpha * g1x * g1y + beta * (hb01 - ha01),
+                       alpha * g1y * g1x + beta * (hb01 - ha01),
+                       alpha * g1y * g1y + beta * (hb11 - ha11))
+            add_block(J, j, j + 1, alpha * g1x * g2x - beta * hb00, alpha * g1x * g2y - beta * hb01,
+                       alpha * g1y * g2x - beta * hb01, alpha * g1y * g2y - beta * hb11)
+            add_block(J, j + 1, j, alpha * g2x * g1x - beta * hb00, alpha * g2x * g1y - beta * hb01,
+                       alpha * g2y * g1x - beta * hb01, alpha * g2y * g1y - beta * hb11)
+            add_block(J, j + 1, j + 1, alpha * g2x * g2x + beta * hb00, alpha * g2x * g2y + beta * hb01,
+                       alpha * g2y * g2x + beta * hb01, alpha * g2y * g2y + beta * hb11)
+    if not water:
+        return 0.0
+    # drag (docs/model.md §4): F = -c_t l (v_t + v_t|v_t|) t - c_n l (v_n + v_n|v_n|) n, half per node
+    ct = 0.25 * prm[P_RHO] * math.pi * prm[P_CF] * (prm[P_A] + prm[P_B])
+    cn = prm[P_RHO] * prm[P_CD] * prm[P_A]
+    power = 0.0
+    for i in range(N - 1):
+        l, tx, ty, nx, ny, vx, vy, vt, vn = edge_frame(q, v, i)
+        gt = vt + vt * abs(vt)
+        gn = vn + vn * abs(vn)
+        fx = -ct * l * gt * tx - cn * l * gn * nx
+        fy = -ct * l * gt * ty - cn * l * gn * ny
+        power -= fx * vx + fy * vy
+        F[2 * i] += 0.5 * fx
+        F[2 * i + 1] += 0.5 * fy
+        F[2 * i + 2] += 0.5 * fx
+        F[2 * i + 3] += 0.5 * fy
+        if jac:
+            dgt = 1.0 + 2.0 * abs(vt)
+            dgn = 1.0 + 2.0 * abs(vn)
+            # d F_edge / d v_edge, a quarter of it on each of the four node blocks
+            qv = 0.25 * cv
+            c00 = -qv * l * (ct * dgt * tx * tx + cn * dgn * nx * nx)
+            c01 = -qv * l * (ct * dgt * tx * ty + cn * dgn * nx * ny)
+            c11 = -qv * l * (ct * dgt * ty * ty + cn * dgn * ny * ny)
+            # d F_edge / d e (e = x[i+1] - x[i]), half of it per node, sign by node
+            #   = -ct [gt t t^T + dgt vn t n^T + gt n n^T] - cn [gn n t^T - dgn vt n n^T - gn t n^T]
+            hx = 0.5 * cx
+            d00 = -hx * (ct * (gt * tx * tx + dgt * vn * tx * nx + gt * nx * nx)
+                         + cn * (gn * nx * tx - dgn * vt * nx * nx - gn * tx * nx))
+            d01 = -hx * (ct * (gt * tx * ty + dgt * vn * tx * ny + gt * nx * ny)
+                         + cn * (gn * nx * ty - dgn * vt * nx * ny - gn * tx * ny))
+            d10 = -hx * (ct * (gt * ty * tx + dgt * vn * ty * nx + gt * ny * nx)
+                         + cn * (gn * ny * tx - dgn * vt * ny * nx - gn * ty * nx))
+            d11 = -hx * (ct * (gt * ty * ty + dgt * vn * ty * ny + gt * ny * ny)
+                         + cn * (gn * ny * ty - dgn * vt * ny * ny - gn * ty * ny))
+            for a in (i, i + 1):
+                add_block(J, a, i, c00 - d00, c01 - d01, c01 - d10, c11 - d11)
+                add_block(J, a, i + 1, c00 + d00, c01 + d01, c01 + d10, c11 + d11)
+    return power
+
+
+@njit(cache=True, error_model="numpy")
+def added_mass(q, prm, dv, out, J, coef, apply, jac):
+    """Added mass of docs/model.md §4: ``M_A`` puts ``mu_n/4 n n^T`` on the four blocks of each
+    edge, ``mu_n = rho pi C_A a^2 l``. If ``apply``, add ``M_A dv`` to ``out``; if ``jac``,
+    add ``coef M_A`` to the band ``J``."""
+    N = q.size // 2
+    cm = added_mass_coefficient(prm)
+    for i in range(N - 1):
+        ex = q[2 * i + 2] - q[2 * i]
+        ey = q[2 * i + 3] - q[2 * i + 1]
+        l = math.sqrt(ex * ex + ey * ey)
+        nx, ny = -ey / l, ex / l
+        mu = 0.25 * cm * l
+        if apply:
+            an = mu * (nx * (dv[2 * i] + dv[2 * i + 2]) + ny * (dv[2 * i + 1] + dv[2 * i + 3]))
+            out[2 * i] += an * nx
+            out[2 * i + 1] += an * ny
+            out[2 * i + 2] += an * nx
+            out[2 * i + 3] += an * ny
+        if jac:
+            m00, m01, m11 = coef * mu * nx * nx, coef * mu * nx * ny, coef * mu * ny * ny
+            for a in (i, i + 1):
+                for b in (i, i + 1):
+                    add_block(J, a, b, m00, m01, m01, m11)
+
+
+@njit(cache=True, error_model="numpy")
+def solve_mass(q, prm, m, F, a, J, piv, water):
+    """Accelerations ``a`` from ``(M + M_A(q)) a = F`` by a banded solve (``M_A = 0`` unless
+    ``water``); ``m`` is the node mass per coordinate (2N,)."""
+    n = q.size
+    if not water:
+        for i in range(n):
+            a[i] = F[i] / m[i]
+        return
+    J[:, :] = 0.0
+    for i in range(n):
+        J[i, KL] = m[i]
+        a[i] = F[i]
+    added_mass(q, prm, a, a, J, 1.0, False, True)
+    band_lu(J, piv, n)
+    band_solve(J, piv, n, a)
+
+
+@njit(cache=True, error_model="numpy")
+def fluid_momentum(q, v, prm, R, sp, sg, J, dt, jac):
+    """The water's kinetic energy ``T_f = sum_i 1/2 mu_n (v^i . n^i)^2`` (docs/model.md §4) and its
+    derivatives: adds ``sp P_f + sg G`` to R (2N,), with the water's momentum
+    ``P_f = dT_f/dv`` (half of each edge's ``mu_n v_n n`` to each node) [N s] and
+    ``G = dT_f/dx`` [N]. If ``jac``, adds the Jacobian of ``P_f - dt G`` with respect to the
+    end-of-step velocity (``x = x0 + dt v``) to the band J:
+    ``dP_f/dv + dt (dP_f/dx - dG/dv) - dt^2 dG/dx`` (``M_A``, a skew gyroscopic part and a
+    symmetric curvature part). Returns ``T_f`` [J].
+
+    Per edge, with ``c = rho pi C_A a^2`` (``mu_n = c l``), ``e = x[i+1] - x[i]``:
+    ``dT/de = c (vn^2/2 t - vn vt n)``, ``d(mu_n vn n)/de = c (-vt n n^T + vn (n t^T - t n^T))``,
+    ``d2T/de2 = c/l (vt^2 - vn^2/2) n n^T``.
+    """
+    N = q.size // 2
+    cm = added_mass_coefficient(prm)
+    tf = 0.0
+    for i in range(N - 1):
+        l, tx, ty, nx, ny, vx, vy, vt, vn = edge_frame(q, v, i)
+        tf += 0.5 * cm * l * vn * vn
+        pn = 0.5 * sp * cm * l * vn  # half the edge's momentum to each node
+        gt = sg * cm * 0.5 * vn * vn
+        gn = -sg * cm * vn * vt
+        gx, gy = gt * tx + gn * nx, gt * ty + gn * ny
+        R[2 * i] += pn * nx - gx
+        R[2 * i + 1] += pn * ny - gy
+        R[2 * i + 2] += pn * nx + gx
+        R[2 * i + 3] += pn * ny + gy
+        if jac:
+            a = 0.25 * cm * l
+            # D = d(edge momentum)/de; block (a, b) gets A + dt/2 (s_b D - s_a D^T) - dt^2 s_a s_b H
+            d00 = cm * (-vt * nx * nx + vn * (nx * tx - tx * nx))
+            d01 = cm * (-vt * nx * ny + vn * (nx * ty - tx * ny))
+            d10 = cm * (-vt * ny * nx + vn * (ny * tx - ty * nx))
+            d11 = cm * (-vt * ny * ny + vn * (ny * ty - ty * ny))
+            hc = dt * dt * cm / l * (vt * vt - 0.5 * vn * vn)
+            hd = 0.5 * dt
+            for ia in range(2):
+                sa = 2.0 * ia - 1.0
+                for ib in range(2):
+                    sb = 2.0 * ib - 1.0
+                    h = hc * sa * sb
+                    add_block(
+                        J, i + ia, i + ib,
+                        a * nx * nx + hd * (sb * d00 - sa * d00) - h * nx * nx,
+                        a * nx * ny + hd * (sb * d01 - sa * d10) - h * nx * ny,
+                        a * ny * nx + hd * (sb * d10 - sa * d01) - h * ny * nx,
+                        a * ny * ny + hd * (sb * d11 - sa * d11) - h * ny * ny,
+                    )
+    return tf
+
+
+@njit(cache=True, error_model="numpy")
+def munk_force(q, v, prm, F):
+    """Adds the velocity part of the consistent added-mass force, ``dT_f/dx - (dP_f/dx) v``
+    (the turning normal's terms, the Munk moment), to F (2N,) [N]. With it,
+    ``(M + M_A) a = F_other + munk`` is the Lagrangian equation of ``T_f`` (docs/model.md §4)."""
+    N = q.size // 2
+    cm = added_mass_coefficient(prm)
+    for i in range(N - 1):
+        l, tx, ty, nx, ny, vx, vy, vt, vn = edge_frame(q, v, i)
+        dx = v[2 * i + 2] - v[2 * i]
+        dy = v[2 * i + 3] - v[2 * i + 1]
+        et = dx * tx + dy * ty
+        en = dx * nx + dy * ny
+        gt = 0.5 * cm * vn * vn
+        gn = -cm * vn * vt
+        # half of D (v[i+1] - v[i]) on each node, D = c (-vt n n^T + vn (n t^T - t n^T))
+        ct = -0.5 * cm * (-vn * en)
+        cn = -0.5 * cm * (-vt * en + vn * et)
+        F[2 * i] += -gt * tx - gn * nx + ct * tx + cn * nx
+        F[2 * i + 1] += -gt * ty - gn * ny + ct * ty + cn * ny
+        F[2 * i + 2] += gt * tx + gn * nx + ct * tx + cn * nx
+        F[2 * i + 3] += gt * ty + gn * ny + ct * ty + cn * ny
+
+
+@njit(cache=True, error_model="numpy")
+def fluid_kinetic_energy(q, v, prm):
+    """``T_f = sum_i 1/2 mu_n (v^i . n^i)^2``, the water's kinetic energy (docs/model.md §4) [J]."""
+    N = q.size // 2
+    cm = added_mass_coefficient(prm)
+    tf = 0.0
+    for i in range(N - 1):
+        ex = q[2 * i + 2] - q[2 * i]
+        ey = q[2 * i + 3] - q[2 * i + 1]
+        vx = 0.5 * (v[2 * i] + v[2 * i + 2])
+        vy = 0.5 * (v[2 * i + 1] + v[2 * i + 3])
+        w = vy * ex - vx * ey  # l v_n
+        tf += 0.5 * cm * w * w / math.sqrt(ex * ex + ey * ey)
+    return tf
+
+
+@njit(cache=True, error_model="numpy")
+def damping_power(q, v, prm):
+    """Power lost to material damping, ``damping_bend sum kappa_dot^2 + damping_stretch sum
+    ldot^2`` (docs/model.md §3) [W]."""
+    N = q.size // 2
+    db, ds = prm[P_DBEND], prm[P_DSTRETCH]
+    p = 0.0
+    if ds > 0.0:
+        for k in range(N - 1):
+            ex = q[2 * k + 2] - q[2 * k]
+            ey = q[2 * k + 3] - q[2 * k + 1]
+            ld = (ex * (v[2 * k + 2] - v[2 * k]) + ey * (v[2 * k + 3] - v[2 * k + 1])) / math.sqrt(
+                ex * ex + ey * ey
+            )
+            p += ds * ld * ld
+    if db > 0.0:
+        for j in range(1, N - 1):
+            k, g0x, g0y, g1x, g1y, g2x, g2y = turning(q, j)[:7]
+            kd = (1.0 + 0.25 * k * k) * (g0x * v[2 * j - 2] + g0y * v[2 * j - 1] + g1x * v[2 * j]
+                                         + g1y * v[2 * j + 1] + g2x * v[2 * j + 2] + g2y * v[2 * j + 3])
+            p += db * kd * kd
+    return p
+
+
+@njit(cache=True, error_model="numpy")
+def actuator_power(q, kbar, lbar, u_k, u_l, prm):
+    """Power the inputs put into the body, ``dE/dkbar . u_k + dE/dlbar . u_l`` (docs/model.md §3) [W]."""
+    N = q.size // 2
+    EA, EI = prm[P_EA], prm[P_EI]
+    p = 0.0
+    for j in range(1, N - 1):
+        lv = 0.5 * (lbar[j - 1] + lbar[j])
+        dk = turning(q, j)[0] - kbar[j - 1]
+        p -= EI / lv * dk * u_k[j - 1]
+        p -= 0.25 * EI * dk * dk / (lv * lv) * (u_l[j - 1] + u_l[j])
+    for k in range(N - 1):
+        r = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1]) / lbar[k]
+        p -= 0.5 * EA * (r * r - 1.0) * u_l[k]
+    return p
+
+
+@njit(cache=True, error_model="numpy")
+def kinetic_friction(q, v, i, fn, eps2, prm):
+    """Kinetic friction on sliding node i with normal load ``fn`` [N] (docs/model.md §5) and its
+    derivative by the node's velocity (the tangent's dependence on q is left out).
+
+    Isotropic: ``-mu_d fn v / s``, ``s = sqrt(|v|^2 + eps2)`` (a smoothing far below the
+    sticking speed). Anisotropic: ``-fn (mu_t v_t t + mu_lateral v_n n) / s``, with ``mu_t`` the
+    forward or backward coefficient by the sign of ``v_t``.
+
+    Returns:
+        (fx, fy, d fx/d vx, d fx/d vy, d fy/d vx, d fy/d vy).
+    """
+    vx, vy = v[2 * i], v[2 * i + 1]
+    s = math.sqrt(vx * vx + vy * vy + eps2)
+    if prm[P_ANISO] == 0.0:
+        c = prm[P_MUD] * fn
+        s3 = s * s * s
+        return (-c * vx / s, -c * vy / s, -c * (1.0 / s - vx * vx / s3), c * vx * vy / s3,
+                c * vx * vy / s3, -c * (1.0 / s - vy * vy / s3))
+    tx, ty = node_tangent(q, i)
+    nx, ny = -ty, tx
+    vt = vx * tx + vy * ty
+    vn = vx * nx + vy * ny
+    mt = prm[P_MU_FWD] if vt > 0.0 else prm[P_MU_BWD]
+    mn = prm[P_MU_LAT]
+    gx = fn * (mt * vt * tx + mn * vn * nx)  # the friction force is -g / s
+    gy = fn * (mt * vt * ty + mn * vn * ny)
+    s3 = s * s * s
+    # d(-g/s)/dv = -(fn (mt t t^T + mn n n^T)) / s + g v^T / s^3
+    a00 = fn * (mt * tx * tx + mn * nx * nx)
+    a01 = fn * (mt * tx * ty + mn * nx * ny)
+    a11 = fn * (mt * ty * ty + mn * ny * ny)
+    return (-gx / s, -gy / s, -a00 / s + gx * vx / s3, -a01 / s + gx * vy / s3,
+            -a01 / s + gy * vx / s3, -a11 / s + gy * vy / s3)

@@ -1,0 +1,121 @@
+"""The simulator's array layout (docs/model.md §2-§5a): index constants and :class:`SimArrays`.
+
+Conventions: positions ``q`` and velocities ``v`` are flat, interleaved arrays of length 2N
+(``q[2i], q[2i+1]`` are x, y of node i) so that they index the banded Jacobian directly; the
+simulator exposes them as (N, 2) views. Rest curvatures ``kbar`` (N-2) belong to the interior
+nodes 1..N-2 (``kbar[j-1]`` at node j), rest lengths ``lbar`` (N-1) to the edges.
+
+Parameters travel in one float64 vector ``prm`` (indices ``P_*``), per-robot scratch in
+``buf`` (rows ``B_*``, each 2N long), integer scratch in ``ibuf`` (rows ``I_*``) and step
+diagnostics in ``out`` (indices ``O_*``). :class:`SimArrays` names the nine arrays of one robot
+(or, with a leading axis, of a batch); the kernels take it as one argument.
+
+Calls from Python pass ``tuple(arrays)`` and the kernel turns it back into ``SimArrays`` on
+entry (``SimArrays(*s)``, free in compiled code): numba's dispatcher types a plain tuple of
+arrays in C but a NamedTuple in Python, about 5 µs more per call, a fifth of a robot step.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from soft_snake_gym.physics.banded import WIDTH
+
+# --- parameter vector ----------------------------------------------------------------------
+P_EA, P_EI, P_DBEND, P_RHO, P_CF, P_CD, P_CA, P_A, P_B = 0, 1, 2, 3, 4, 5, 6, 7, 8
+P_MUS, P_MUD, P_VTOL, P_G = 9, 10, 11, 12
+P_H, P_SUBSTEPS, P_TOL, P_MAXIT, P_MEDIUM, P_METHOD, P_MAXSTRAIN, P_CHECKSI = (
+    13, 14, 15, 16, 17, 18, 19, 20,
+)
+P_DSTRETCH = 21
+P_ADDED_MASS = 22  # ADDED_MASS_* code
+
+P_ANISO, P_MU_FWD, P_MU_BWD, P_MU_LAT = 23, 24, 25, 26  # anisotropic kinetic friction
+N_PRM = 27
+
+ADDED_MASS_CONSISTENT, ADDED_MASS_KELASIDI = 0, 1
+
+MEDIUM_NONE, MEDIUM_WATER, MEDIUM_GROUND = 0, 1, 2
+METHOD_BACKWARD_EULER, METHOD_SYMPLECTIC_EULER = 0, 1
+
+# --- scratch rows ----------------------------------------------------------------------------
+B_R, B_DV, B_F, B_Q0, B_V0, B_VACC, B_M, B_FEXT, B_KEYS, B_A, B_P0 = range(11)
+N_BUF = 11
+I_PIV, I_ORDER, I_FRICTION, I_SWITCHES = 0, 1, 2, 3
+N_IBUF = 4
+SLIDING, STUCK = 0, 1
+MAX_SWITCHES = 2  # contact changes per node and step: bounds the active-set passes
+
+# --- diagnostics -----------------------------------------------------------------------------
+(O_STATUS, O_NITER, O_RESIDUAL, O_P_FLUID, O_P_FRICTION, O_P_ACT, O_E_FLUID, O_E_FRICTION,
+ O_E_ACT, O_W_ACT, O_NSTEPS) = range(11)
+# energy ledger (docs/model.md §4): damping power of the last step and its accumulated energy, and
+# the body's kinetic and elastic energy and the water's kinetic energy T_f after the last step
+O_P_DAMP, O_E_DAMP, O_E_KIN, O_E_ELASTIC, O_T_FLUID = range(11, 16)
+# where the ledger starts (written at reset/set_state): those energies and the accumulated work
+# and dissipation at that moment
+O_L0_KIN, O_L0_ELASTIC, O_L0_T_FLUID, O_L0_W_ACT, O_L0_E_FLUID, O_L0_E_DAMP, O_L0_E_FRICTION = range(16, 23)
+# the ledger since then, ``out[O_LEDGER : O_LEDGER + 8]`` in the order of LEDGER_KEYS
+O_LEDGER, N_LEDGER = 23, 8
+LEDGER_KEYS = ("actuator_work", "fluid_dissipation", "damping_dissipation", "friction_dissipation",
+               "delta_kinetic", "delta_elastic", "delta_fluid_kinetic", "error")
+N_OUT = 31  # simulated time is O_NSTEPS * h: derived, so it cannot drift
+
+# --- status codes ----------------------------------------------------------------------------
+OK, NOT_CONVERGED, NON_FINITE, SELF_INTERSECTION, RUNAWAY_STRETCH, BAD_REST_LENGTH = range(6)
+STATUS_REASONS = (
+    "ok",
+    "newton_not_converged",
+    "non_finite_state",
+    "self_intersection",
+    "runaway_stretch",
+    "non_positive_rest_length",
+)
+
+
+class SimArrays(NamedTuple):
+    """The arrays of one robot's simulation (or of ``n`` robots, stacked on a leading axis),
+    as the kernels take them. numba passes a ``NamedTuple`` of arrays as one argument.
+
+    Attributes:
+        q: node positions, interleaved (x0, y0, x1, ...), (2N,) [m].
+        v: node velocities, same layout, (2N,) [m/s].
+        kbar: rest curvatures of the interior nodes, (N-2,) [-].
+        lbar: rest lengths of the edges, (N-1,) [m].
+        prm: parameters at ``P_*``, (N_PRM,).
+        buf: float scratch rows ``B_*``, (N_BUF, 2N).
+        J: banded Jacobian / mass matrix, (2N, WIDTH) (see :mod:`~soft_snake_gym.physics.banded`).
+        ibuf: integer scratch rows ``I_*`` (pivots, sort order, contact states), (N_IBUF, 2N).
+        out: step diagnostics and the energy ledger at ``O_*``, (N_OUT,).
+    """
+
+    q: np.ndarray
+    v: np.ndarray
+    kbar: np.ndarray
+    lbar: np.ndarray
+    prm: np.ndarray
+    buf: np.ndarray
+    J: np.ndarray
+    ibuf: np.ndarray
+    out: np.ndarray
+
+    def row(self, i: int) -> SimArrays:
+        """Robot ``i`` of stacked arrays: views, so writes go to the batch."""
+        return SimArrays(*(a[i] for a in self))
+
+
+def allocate_arrays(N: int, batch: tuple[int, ...] = ()) -> SimArrays:
+    """Zeroed :class:`SimArrays` of ``batch`` robots of N nodes (float64; ``ibuf`` int64)."""
+    return SimArrays(
+        q=np.zeros(batch + (2 * N,)),
+        v=np.zeros(batch + (2 * N,)),
+        kbar=np.zeros(batch + (N - 2,)),
+        lbar=np.zeros(batch + (N - 1,)),
+        prm=np.zeros(batch + (N_PRM,)),
+        buf=np.zeros(batch + (N_BUF, 2 * N)),
+        J=np.zeros(batch + (2 * N, WIDTH)),
+        ibuf=np.zeros(batch + (N_IBUF, 2 * N), dtype=np.int64),
+        out=np.zeros(batch + (N_OUT,)),
+    )

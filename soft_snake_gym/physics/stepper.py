@@ -1,0 +1,471 @@
+"""Time stepping of the discrete rod (docs/model.md §5-§5a): backward Euler by damped Newton on
+the banded Jacobian, explicit symplectic Euler, the stick-slip decision both share, the state
+check after each step, the energy ledger, and :func:`simulate`, which advances one robot's
+:class:`~soft_snake_gym.physics.layout.SimArrays` by whole steps. Nothing here allocates or
+raises; failures come back as a status code (``layout.OK``, ...).
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from soft_snake_gym.physics import banded, forces, geometry, layout
+from soft_snake_gym.physics.banded import KL, add_block, band_lu, band_solve
+from soft_snake_gym.physics.cache import drop_stale_cache
+from soft_snake_gym.physics.forces import (
+    actuator_power,
+    added_mass,
+    assemble,
+    damping_power,
+    elastic_energy,
+    fluid_kinetic_energy,
+    fluid_momentum,
+    kinetic_friction,
+    munk_force,
+    solve_mass,
+)
+from soft_snake_gym.physics.geometry import self_intersects
+from soft_snake_gym.physics.layout import (
+    ADDED_MASS_CONSISTENT,
+    B_A,
+    B_DV,
+    B_F,
+    B_FEXT,
+    B_KEYS,
+    B_M,
+    B_P0,
+    B_Q0,
+    B_R,
+    B_V0,
+    B_VACC,
+    BAD_REST_LENGTH,
+    I_FRICTION,
+    I_ORDER,
+    I_PIV,
+    I_SWITCHES,
+    MAX_SWITCHES,
+    MEDIUM_GROUND,
+    MEDIUM_WATER,
+    METHOD_SYMPLECTIC_EULER,
+    NON_FINITE,
+    NOT_CONVERGED,
+    O_E_ACT,
+    O_E_DAMP,
+    O_E_ELASTIC,
+    O_E_FLUID,
+    O_E_FRICTION,
+    O_E_KIN,
+    O_L0_E_DAMP,
+    O_L0_E_FLUID,
+    O_L0_E_FRICTION,
+    O_L0_ELASTIC,
+    O_L0_KIN,
+    O_L0_T_FLUID,
+    O_L0_W_ACT,
+    O_LEDGER,
+    O_NITER,
+    O_NSTEPS,
+    O_P_ACT,
+    O_P_DAMP,
+    O_P_FLUID,
+    O_P_FRICTION,
+    O_RESIDUAL,
+    O_STATUS,
+    O_T_FLUID,
+    O_W_ACT,
+    OK,
+    P_ADDED_MASS,
+    P_CHECKSI,
+    P_DBEND,
+    P_DSTRETCH,
+    P_G,
+    P_H,
+    P_MAXIT,
+    P_MAXSTRAIN,
+    P_MEDIUM,
+    P_METHOD,
+    P_MUS,
+    P_SUBSTEPS,
+    P_TOL,
+    P_VTOL,
+    RUNAWAY_STRETCH,
+    SELF_INTERSECTION,
+    SLIDING,
+    STUCK,
+    SimArrays,
+)
+
+# the cached kernels embed the code of the kernels they call from these files
+drop_stale_cache(__file__, [banded.__file__, forces.__file__, geometry.__file__, layout.__file__])
+
+
+@njit(cache=True, error_model="numpy")
+def check_state(q, v, lbar, prm, buf, ibuf):
+    """Status code of a state: non-finite, runaway stretch, or self-intersection."""
+    n = q.size
+    for i in range(n):
+        if not (math.isfinite(q[i]) and math.isfinite(v[i])):
+            return NON_FINITE
+    max_strain = prm[P_MAXSTRAIN]
+    for k in range(n // 2 - 1):
+        l = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1])
+        if abs(l / lbar[k] - 1.0) > max_strain:
+            return RUNAWAY_STRETCH
+    if prm[P_CHECKSI] != 0.0 and self_intersects(q, buf[B_KEYS], ibuf[I_ORDER]):
+        return SELF_INTERSECTION
+    return OK
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def classify_contact(v, state, i, limit, at_limit):
+    """The stick-slip decision of node i on the ground (docs/model.md §5), shared by both
+    integrators: the node sticks (``state[i] = STUCK``, its velocity set to zero) if its speed
+    is below ``limit`` [m/s] (or equal to it, if ``at_limit``), else it slides
+    (``state[i] = SLIDING``, velocity kept). Returns True if it sticks.
+
+    Backward Euler passes ``limit = V_tol``; the explicit method passes the speed static
+    friction removes in a sub-step, ``mu_s g dt``, with ``at_limit``.
+    """
+    w = math.hypot(v[2 * i], v[2 * i + 1])
+    if w < limit or (at_limit and w == limit):
+        state[i] = STUCK
+        v[2 * i] = 0.0
+        v[2 * i + 1] = 0.0
+        return True
+    state[i] = SLIDING
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def _be_residual(s, dt, medium, jac):
+    """Residual of backward Euler at the trial velocity ``v`` (also writes ``q = q0 + dt v``),
+    and if ``jac`` its Jacobian into J. In water with the consistent added mass (docs/model.md §4)
+    in momentum form, ``R = M (v - v0) + P_f(q, v) - P_f(q0, v0) - dt (F(q, v) + dT_f/dx(q, v))``
+    (``P_f(q0, v0)`` in ``buf[B_P0]``); with ``added_mass = "kelasidi"``,
+    ``R = (M + M_A(q)) (v - v0) - dt F(q, v)``. Returns
+    (squared 2-norm, max-norm of R/m [m/s], fluid power, friction power)."""
+    q, v, kbar, lbar, prm, buf, J, ibuf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.J, s.ibuf
+    n = q.size
+    q0, v0, F, R, m = buf[B_Q0], buf[B_V0], buf[B_F], buf[B_R], buf[B_M]
+    fext = buf[B_FEXT]
+    dv = buf[B_A]
+    for i in range(n):
+        q[i] = q0[i] + dt * v[i]
+        F[i] = fext[i]
+        dv[i] = v[i] - v0[i]
+    if jac:
+        J[:, :] = 0.0
+    water = medium == MEDIUM_WATER
+    p_fluid = assemble(q, v, kbar, lbar, prm, F, J, -dt * dt, -dt, jac, water)
+    for i in range(n):
+        R[i] = m[i] * dv[i] - dt * F[i]
+    if jac:
+        for i in range(n):
+            J[i, KL] += m[i]
+    if water:
+        if int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
+            fluid_momentum(q, v, prm, R, 1.0, -dt, J, dt, jac)
+            p0 = buf[B_P0]
+            for i in range(n):
+                R[i] -= p0[i]
+        else:
+            added_mass(q, prm, dv, R, J, 1.0, True, jac)
+    p_fric = 0.0
+    if medium == MEDIUM_GROUND:
+        state = ibuf[I_FRICTION]
+        eps2 = (0.1 * prm[P_VTOL]) ** 2  # nodes slower than V_tol stick, so this only smooths
+        for i in range(n // 2):
+            r0, r1 = 2 * i, 2 * i + 1
+            if state[i] == STUCK:
+                R[r0] = v[r0]
+                R[r1] = v[r1]
+                if jac:
+                    J[r0, :] = 0.0
+                    J[r1, :] = 0.0
+                    J[r0, KL] = 1.0
+                    J[r1, KL] = 1.0
+            else:
+                fx, fy, d00, d01, d10, d11 = kinetic_friction(q, v, i, m[r0] * prm[P_G], eps2, prm)
+                R[r0] -= dt * fx
+                R[r1] -= dt * fy
+                p_fric -= fx * v[r0] + fy * v[r1]
+                if jac:
+                    add_block(J, i, i, -dt * d00, -dt * d01, -dt * d10, -dt * d11)
+    norm2 = 0.0
+    rmax = 0.0
+    for i in range(n):
+        norm2 += R[i] * R[i]
+        rmax = max(rmax, abs(R[i]) / m[i])  # as a velocity: mass-independent tolerance
+    return norm2, rmax, p_fluid, p_fric
+
+
+@njit(cache=True, error_model="numpy")
+def _update_contacts(v, buf, ibuf, prm, dt, n):
+    """Make stick-slip consistent with the end of a converged step (docs/model.md §5); True if a
+    node changed and the step must be solved again.
+
+    Sliding nodes that end slower than ``V_tol`` stick. Otherwise every stuck node whose
+    holding force ``f = -m v0/dt - F`` (``F``: every other force, at the end of the step)
+    exceeds ``mu_s F_N`` is released to slide, with a first guess along its push (releasing
+    them one at a time, worst first, gave the same gaits to 1e-4 in more passes). A node
+    released too eagerly ends slow and sticks again in the next pass. Each node changes at
+    most ``MAX_SWITCHES`` times per step, so the passes end.
+    """
+    F, m, v0 = buf[B_F], buf[B_M], buf[B_V0]
+    state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
+    stuck_any = False
+    for i in range(n // 2):
+        if (state[i] == SLIDING and switches[i] < MAX_SWITCHES
+                and classify_contact(v, state, i, prm[P_VTOL], False)):
+            switches[i] += 1
+            stuck_any = True
+    if stuck_any:
+        return True
+    released = False
+    for i in range(n // 2):
+        if state[i] != STUCK or switches[i] >= MAX_SWITCHES:
+            continue
+        fx = -m[2 * i] * v0[2 * i] / dt - F[2 * i]
+        fy = -m[2 * i] * v0[2 * i + 1] / dt - F[2 * i + 1]
+        f = math.hypot(fx, fy)
+        if f <= prm[P_MUS] * m[2 * i] * prm[P_G]:
+            continue
+        state[i] = SLIDING
+        switches[i] += 1
+        released = True
+        # first guess: just above the sticking speed, along the push (Newton finds the rest)
+        v[2 * i] = -2.0 * prm[P_VTOL] * fx / f
+        v[2 * i + 1] = -2.0 * prm[P_VTOL] * fy / f
+    return released
+
+
+@njit(cache=True, error_model="numpy")
+def _be_substep(s, dt, medium):
+    """One backward-Euler step by damped Newton on the banded analytic Jacobian (docs/model.md §5a).
+    Returns (status, iterations, residual, fluid power, friction power)."""
+    q, v, prm, buf, J, ibuf = s.q, s.v, s.prm, s.buf, s.J, s.ibuf
+    n = q.size
+    q0, v0, vacc, dv = buf[B_Q0], buf[B_V0], buf[B_VACC], buf[B_DV]
+    R = buf[B_R]
+    piv = ibuf[I_PIV]
+    tol = prm[P_TOL]
+    maxit = int(prm[P_MAXIT])
+    if medium == MEDIUM_GROUND:
+        # first guess of the contacts from the start of the step: slow nodes stick, the rest
+        # slide; _update_contacts then makes them consistent with the end of the step
+        state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
+        for i in range(n):
+            q0[i] = q[i]
+            v0[i] = v[i]
+        for i in range(n // 2):
+            switches[i] = 0
+            classify_contact(v, state, i, prm[P_VTOL], False)
+    else:
+        # predictor: extrapolate the velocity from the last step (v0 still holds its start;
+        # set_state makes it the current velocity, so a fresh state starts with v)
+        for i in range(n):
+            q0[i] = q[i]
+            v_prev = v0[i]
+            v0[i] = v[i]
+            v[i] = 2.0 * v[i] - v_prev
+        if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
+            p0 = buf[B_P0]
+            p0[:] = 0.0
+            fluid_momentum(q0, v0, prm, p0, 1.0, 0.0, J, 0.0, False)
+    norm2, rmax, p_fluid, p_fric = _be_residual(s, dt, medium, True)
+    it = 0
+    pass_it = 0
+    while True:
+        if rmax <= tol:
+            # stick-slip decided by the end of the step (docs/model.md §5): if a contact changes,
+            # the step is solved again from the current iterate
+            if medium != MEDIUM_GROUND or not _update_contacts(v, buf, ibuf, prm, dt, n):
+                break
+            norm2, rmax, p_fluid, p_fric = _be_residual(s, dt, medium, True)
+            pass_it = 0  # the iteration cap holds per contact pass
+            continue
+        if pass_it == maxit or not math.isfinite(norm2):
+            return NOT_CONVERGED, it, rmax, p_fluid, p_fric
+        it += 1
+        pass_it += 1
+        for i in range(n):
+            vacc[i] = v[i]
+            dv[i] = -R[i]
+        if not band_lu(J, piv, n):
+            return NOT_CONVERGED, it, rmax, p_fluid, p_fric
+        band_solve(J, piv, n, dv)
+        # backtracking line search on |R|^2. In water most steps converge after one Newton
+        # iteration, so trials skip the Jacobian; on the ground a pass takes several, so the
+        # full step's trial assembles it too and, accepted, serves the next iteration
+        fused = medium == MEDIUM_GROUND
+        step = 1.0
+        for _ in range(12):
+            for i in range(n):
+                v[i] = vacc[i] + step * dv[i]
+            trial = _be_residual(s, dt, medium, fused and step == 1.0)
+            if trial[0] < norm2 * (1.0 - 1e-4 * step):
+                break
+            step *= 0.5
+        norm2, rmax, p_fluid, p_fric = trial
+        if rmax > tol and pass_it < maxit and math.isfinite(norm2) and not (fused and step == 1.0):
+            # another iteration follows: the Jacobian at the accepted velocity (the residual
+            # is recomputed bit for bit)
+            _be_residual(s, dt, medium, True)
+    return OK, it, rmax, p_fluid, p_fric
+
+
+@njit(cache=True, error_model="numpy")
+def _symplectic_substep(s, dt, medium):
+    """One explicit semi-implicit (symplectic) Euler step: kick with F(q, v), then drift.
+    In water ``(M + M_A(q)) a = F``, plus with the consistent added mass the velocity terms of
+    :func:`munk_force`. On the ground, friction is decided by the end of the kick (docs/model.md
+    §5): a node whose frictionless end velocity ``w`` could be stopped within ``mu_s F_N``
+    sticks, any other slides with ``mu_d F_N`` against ``w`` (the lumped mass matrix is
+    diagonal on the ground, so each node is decided on its own).
+    Returns (fluid power, friction power)."""
+    q, v, kbar, lbar, prm, buf, J, ibuf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.J, s.ibuf
+    n = q.size
+    F, a, m, fext = buf[B_F], buf[B_A], buf[B_M], buf[B_FEXT]
+    for i in range(n):
+        F[i] = fext[i]
+    p_fluid = assemble(q, v, kbar, lbar, prm, F, J, 0.0, 0.0, False, medium == MEDIUM_WATER)
+    if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
+        munk_force(q, v, prm, F)
+    solve_mass(q, prm, m, F, a, J, ibuf[I_PIV], medium == MEDIUM_WATER)
+    p_fric = 0.0
+    for i in range(n):
+        v[i] += dt * a[i]
+    if medium == MEDIUM_GROUND:
+        state = ibuf[I_FRICTION]
+        stop = dt * prm[P_G]  # the speed a friction coefficient of 1 removes in dt
+        for i in range(n // 2):
+            r0, r1 = 2 * i, 2 * i + 1
+            if not classify_contact(v, state, i, prm[P_MUS] * stop, True):
+                # kinetic friction along the frictionless end velocity, explicit (a sub-step
+                # is far shorter than the time friction needs to stop the node)
+                fx, fy = kinetic_friction(q, v, i, m[r0] * prm[P_G], 0.0, prm)[:2]
+                v[r0] += dt * fx / m[r0]
+                v[r1] += dt * fy / m[r0]
+                p_fric -= fx * v[r0] + fy * v[r1]
+    for i in range(n):
+        q[i] += dt * v[i]
+    return p_fluid, p_fric
+
+
+@njit(cache=True, error_model="numpy")
+def ledger_energies(s):
+    """Write the body's kinetic and elastic energy and the water's ``T_f`` (0 out of water)
+    into ``out[O_E_KIN]``, ``out[O_E_ELASTIC]``, ``out[O_T_FLUID]`` [J], and the energy ledger
+    since the start recorded at ``O_L0_*`` into ``out[O_LEDGER:]`` (``LEDGER_KEYS``); ``s`` is
+    :class:`~soft_snake_gym.physics.layout.SimArrays` or the plain tuple of its arrays."""
+    s = SimArrays(*s)
+    q, v, kbar, lbar, prm, buf, out = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.out
+    m = buf[B_M]
+    ke = 0.0
+    for i in range(q.size):
+        ke += 0.5 * m[i] * v[i] * v[i]
+    out[O_E_KIN] = ke
+    out[O_E_ELASTIC] = elastic_energy(q, kbar, lbar, prm)
+    out[O_T_FLUID] = fluid_kinetic_energy(q, v, prm) if int(prm[P_MEDIUM]) == MEDIUM_WATER else 0.0
+    # the ledger since O_L0_*: actuator work = dissipation + energy changes + error
+    work = out[O_W_ACT] - out[O_L0_W_ACT]
+    error = work
+    for k, (now, start) in enumerate(((O_E_FLUID, O_L0_E_FLUID), (O_E_DAMP, O_L0_E_DAMP),
+                                      (O_E_FRICTION, O_L0_E_FRICTION), (O_E_KIN, O_L0_KIN),
+                                      (O_E_ELASTIC, O_L0_ELASTIC), (O_T_FLUID, O_L0_T_FLUID))):
+        term = out[now] - out[start]
+        out[O_LEDGER + 1 + k] = term
+        error -= term
+    out[O_LEDGER] = work
+    out[O_LEDGER + 7] = error
+
+
+@njit(cache=True, error_model="numpy")
+def simulate(s, u_k, u_l, n_steps):
+    """Advance one robot by ``n_steps`` steps of ``h`` with inputs held constant; stops at the
+    first failure. Per step: rest shape moves by ``dt u`` each sub-step, the state follows by
+    the chosen integrator, then the state is checked.
+
+    Args:
+        s: the robot's :class:`~soft_snake_gym.physics.layout.SimArrays` (or, from Python, the
+            plain tuple of its arrays: see ``layout``), advanced in place; diagnostics go into
+            ``s.out`` (the energies of :func:`ledger_energies` once, at the end).
+        u_k: curvature rates, (N-2,) [1/s].
+        u_l: rest-length rates, (N-1,) [m/s].
+        n_steps: steps of ``h``.
+
+    Returns:
+        The status code (``OK`` = 0).
+    """
+    s = SimArrays(*s)
+    q, v, kbar, lbar, prm, buf, ibuf, out = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.ibuf, s.out
+    h = prm[P_H]
+    nsub = int(prm[P_SUBSTEPS])
+    dt = h / nsub
+    medium = int(prm[P_MEDIUM])
+    symplectic = int(prm[P_METHOD]) == METHOD_SYMPLECTIC_EULER
+    damped = prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0
+    status = OK
+    for _ in range(n_steps):
+        e_fluid = 0.0
+        e_fric = 0.0
+        e_act = 0.0
+        e_damp = 0.0
+        niter = 0
+        resid = 0.0
+        for _s in range(nsub):
+            # the inputs' work over the sub-step by the trapezoidal rule on P_act: exact for a
+            # body that lags the rest shape and for one that follows it at once, where a
+            # one-point rule charges inputs that reverse every step with work never done
+            p_act0 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+            for j in range(kbar.size):
+                kbar[j] += dt * u_k[j]
+            for k in range(lbar.size):
+                lbar[k] += dt * u_l[k]
+                if not lbar[k] > 0.0:
+                    status = BAD_REST_LENGTH
+            if status != OK:
+                break
+            # each power where the step evaluates its forces: start (explicit) or end (implicit)
+            p_damp = 0.0
+            if symplectic:
+                p_act1 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+                if damped:
+                    p_damp = damping_power(q, v, prm)
+                p_fluid, p_fric = _symplectic_substep(s, dt, medium)
+            else:
+                status, it, res, p_fluid, p_fric = _be_substep(s, dt, medium)
+                niter = max(niter, it)
+                resid = max(resid, res)
+                p_act1 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+                if damped:
+                    p_damp = damping_power(q, v, prm)
+            e_fluid += dt * p_fluid
+            e_damp += dt * p_damp
+            e_fric += dt * p_fric
+            e_act += 0.5 * dt * (p_act0 + p_act1)
+            if status != OK:
+                break
+        if status == OK or status == NOT_CONVERGED:
+            check = check_state(q, v, lbar, prm, buf, ibuf)
+            if check != OK:
+                status = check
+        out[O_STATUS] = status
+        out[O_NITER] = niter
+        out[O_RESIDUAL] = resid
+        out[O_P_FLUID] = e_fluid / h
+        out[O_P_FRICTION] = e_fric / h
+        out[O_P_ACT] = e_act / h
+        out[O_E_FLUID] += e_fluid
+        out[O_E_FRICTION] += e_fric
+        out[O_E_ACT] += abs(e_act)
+        out[O_W_ACT] += e_act
+        out[O_P_DAMP] = e_damp / h
+        out[O_E_DAMP] += e_damp
+        out[O_NSTEPS] += 1
+        if status != OK:
+            break
+    ledger_energies(s)
+    return status
