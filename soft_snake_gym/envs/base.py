@@ -25,6 +25,7 @@ import numpy as np
 
 from soft_snake_gym.config import ConfigError, config_path, from_dict, load_yaml, with_preset
 from soft_snake_gym.envs import task as T
+from soft_snake_gym.envs.render import BodyRenderer, require_interactive_backend
 from soft_snake_gym.envs.task import TaskArrays
 from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig, check_number, plain_number
 from soft_snake_gym.physics import Simulator, body_from_curvature
@@ -186,7 +187,7 @@ def resolve_settings(settings_cls: type, medium: str, config: str | Path | None,
     """Settings from a named preset, a YAML file of constructor keywords and explicit
     keywords, each overriding the one before.
 
-    A ``medium`` key in the file (as in ``configs/eel.yaml``) is accepted if it names this
+    A ``medium`` key in the file (as in the shipped ``eel`` config) is accepted if it names this
     environment's medium. A ``preset`` key (in the file or the keywords) lays that preset's
     simulator sections beneath the rest, field by field
     (:func:`soft_snake_gym.config.with_preset`). Unknown keys are rejected with the closest
@@ -306,8 +307,6 @@ class SoftRobotEnv(gym.Env):
                 f"render_mode = {render_mode!r} is not supported; use None, 'rgb_array' or 'human'"
             )
         if render_mode == "human":
-            from soft_snake_gym.envs.render import require_interactive_backend
-
             require_interactive_backend()  # fail at construction, not at the first frame
         self.render_mode = render_mode
         self._renderer = None
@@ -514,8 +513,6 @@ class SoftRobotEnv(gym.Env):
             )
             return None
         if self._renderer is None:
-            from soft_snake_gym.envs.render import BodyRenderer
-
             self._renderer = BodyRenderer(
                 human=self.render_mode == "human", ground=self.medium == "ground",
                 body_length=self.base_config.rod.length, fps=self.metadata["render_fps"],

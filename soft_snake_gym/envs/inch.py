@@ -117,7 +117,7 @@ class InchEnv(SoftRobotEnv):
     ## Arguments
     ```python
     env = gym.make("SoftWorm-v0", max_length_rate=0.4, ground={"mu_s": 0.9, "mu_d": 0.6})
-    env = gym.make("SoftWorm-v0", config="configs/softworm.yaml")
+    env = gym.make("SoftWorm-v0", config="softworm")  # a shipped config by name, or a YAML path
     env = gym.make("SoftWorm-v0", preset="thesis")  # the sources' physics
     ```
 

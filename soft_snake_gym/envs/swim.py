@@ -163,7 +163,7 @@ class SwimEnv(SoftRobotEnv):
     import gymnasium as gym
     import soft_snake_gym
     env = gym.make("SoftEel-v0", max_curvature_rate=3.0, fluid={"rho": 1025.0})
-    env = gym.make("SoftEel-v0", config="configs/softeel.yaml")  # any keywords from YAML
+    env = gym.make("SoftEel-v0", config="softeel")  # a shipped config by name, or a YAML path
     env = gym.make("SoftEel-v0", preset="thesis", start_on_gait={"alpha": math.pi / 3})
     ```
     Keywords given explicitly override those from ``config``, which override the ``preset``;
