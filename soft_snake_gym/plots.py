@@ -206,7 +206,8 @@ def controller_comparison(runs: dict[str, dict[str, np.ndarray]], specs: dict[st
     return _save(fig, out, dpi=110)
 
 
-def learning_curve(rows: list[dict[str, str]], cfg: Any, out: str | Path) -> Path:
+def learning_curve(rows: list[dict[str, str]], cfg: Any, metrics: Sequence[tuple[str, str, str]],
+                   out: str | Path) -> Path:
     """A run's evaluations: the agent's average speed and cost of transport (mean ± std over the
     evaluation episodes) against environment steps, with the baseline's figures on the same
     seeds as horizontal lines.
@@ -214,13 +215,14 @@ def learning_curve(rows: list[dict[str, str]], cfg: Any, out: str | Path) -> Pat
     Args:
         rows: the rows of learning_curve.csv (text, as ``csv.DictReader`` gives them).
         cfg: the run's :class:`~soft_snake_gym.training.TrainConfig`.
+        metrics: the two panels' (key, label, unit); the CSV has ``<key>_mean``, ``<key>_std`` and
+            ``baseline_<key>``.
         out: the PNG.
     """
     steps = np.array([int(r["timesteps"]) for r in rows])
     fig = _figure(figsize=(10, 3.8))
     axes = fig.subplots(1, 2)
-    for ax, key, label in ((axes[0], "average_speed", "average speed [m/s]"),
-                           (axes[1], "cost_of_transport", "cost of transport [-]")):
+    for ax, (key, label, unit) in zip(axes, metrics, strict=True):
         mean = np.array([float(r[f"{key}_mean"]) for r in rows])
         std = np.array([float(r[f"{key}_std"]) for r in rows])
         ax.plot(steps, mean, "o-", ms=3, label=f"{cfg.algo} agent")
@@ -229,7 +231,7 @@ def learning_curve(rows: list[dict[str, str]], cfg: Any, out: str | Path) -> Pat
             ax.axhline(float(rows[0][f"baseline_{key}"]), color="C3", ls="--",
                        label=f"baseline ({cfg.baseline_spec})")
         ax.set_xlabel("environment steps")
-        ax.set_ylabel(label)
+        ax.set_ylabel(f"{label} [{unit}]")
         ax.grid(alpha=0.3)
         ax.legend()
     axes[1].set_ylim(bottom=0)

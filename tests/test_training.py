@@ -163,9 +163,9 @@ def test_shipped_agents_beat_their_baselines(env_id, baseline):
     "extra,message",
     [
         (["--hyperparams", "env_kwargs.foo=1"], "unknown key 'foo' in SoftEel-v0"),
-        (["--hyperparams", "gamma=1.5"], "hyperparameter gamma = 1.5 must be a number in [0.0, 1.0] (the discount factor)"),
-        (["--hyperparams", "n_steps=0"], "hyperparameter n_steps = 0 must be an integer in [1, inf)"),
-        (["--hyperparams", "learning_rate=-1e-3"], "learning_rate = -0.001 must be a number in (0.0, inf)"),
+        (["--hyperparams", "gamma=1.5"], "hyperparameter gamma = 1.5 is outside the allowed range [0.0, 1.0] (the discount factor)"),
+        (["--hyperparams", "n_steps=0"], "hyperparameter n_steps = 0 must be an integer in [1, inf] (steps per env per rollout)"),
+        (["--hyperparams", "learning_rate=-1e-3"], "learning_rate = -0.001 is outside the allowed range (0.0, inf)"),
         (["--hyperparams", "baseline=pdi"], "unknown policy 'pdi'; did you mean 'pid'?"),
     ],
 )

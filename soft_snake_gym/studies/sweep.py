@@ -40,7 +40,7 @@ import numpy as np
 from soft_snake_gym import plots
 from soft_snake_gym.agents import make_policy
 from soft_snake_gym.envs import register_envs
-from soft_snake_gym.evaluation import evaluate, make_eval_env
+from soft_snake_gym.evaluation import evaluate, make_eval_env, metric_columns
 from soft_snake_gym.gaits import max_serpenoid_amplitude
 
 __all__ = [
@@ -142,11 +142,7 @@ STUDIES: dict[str, Study] = {
         "swim-gait",
         "SoftEel-v0",
         ("alpha", "omega", "E_bend"),
-        (
-            ("average_speed", "average speed", "m/s"),
-            ("curvature_error", "curvature error", "-"),
-            ("mean_fluid_power", "fluid power", "W"),
-        ),
+        tuple(metric_columns(("average_speed", "curvature_error", "mean_fluid_power"))),
         "swimming, amplitude x frequency, open loop vs PID (10, 2, 1), E_bend = 1.87e4 Pa",
         ("open-loop", "pid"),
     ),
@@ -154,7 +150,7 @@ STUDIES: dict[str, Study] = {
         "swim-stiffness",
         "SoftEel-v0",
         ("alpha", "omega", "E_bend"),
-        (("average_speed", "average speed", "m/s"), ("mean_fluid_power", "fluid power", "W")),
+        tuple(metric_columns(("average_speed", "mean_fluid_power"))),
         "swimming, open loop, amplitude x frequency for several bending moduli",
         ("open-loop",),
     ),
@@ -162,11 +158,7 @@ STUDIES: dict[str, Study] = {
         "inch-friction",
         "SoftWorm-v0",
         ("mu_s", "mu_d"),
-        (
-            ("distance", "distance", "m"),
-            ("energy_friction", "friction energy", "J"),
-            ("length_error", "length error", "m"),
-        ),
+        tuple(metric_columns(("distance", "energy_friction", "length_error"))),
         "inching, static x kinetic friction, open loop vs closed loop",
         ("inching", "inching-pid"),
     ),

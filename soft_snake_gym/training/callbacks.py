@@ -10,7 +10,7 @@ from pathlib import Path
 
 from soft_snake_gym.agents import TrainedPolicy, make_policy
 from soft_snake_gym.evaluation import evaluate, make_eval_env, summarize
-from soft_snake_gym.training.config import TrainConfig
+from soft_snake_gym.training.config import CURVE_METRICS, TrainConfig
 from soft_snake_gym.training.run import save_checkpoint
 
 __all__ = ["make_callbacks"]
@@ -74,7 +74,7 @@ def make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start:
                                   vn.clip_obs if vn is not None else 10.0)
             scores = self._score(agent)
             row = {"timesteps": self.num_timesteps, "wall_s": round(time.time() - started, 1)}
-            for key in ("return", "average_speed", "cost_of_transport"):
+            for key in CURVE_METRICS:
                 row[f"{key}_mean"], row[f"{key}_std"] = scores.get(key, (math.nan, math.nan))
                 self.logger.record(f"eval/{key}", row[f"{key}_mean"])
                 if self.baseline is not None:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import inspect
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,12 +18,13 @@ import gymnasium as gym
 
 from soft_snake_gym.config import CONFIG_DIR, ConfigError, config_path, load_yaml
 from soft_snake_gym.envs import register_envs
-from soft_snake_gym.params import plain_number
+from soft_snake_gym.params import check_int, check_number, plain_number
 
 __all__ = [
     "ALGOS",
     "ACTIVATIONS",
     "CONFIGS",
+    "CURVE_METRICS",
     "HYPER_RANGES",
     "TrainConfig",
     "check_env_id",
@@ -37,6 +37,9 @@ ALGOS = ("PPO", "SAC")
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 DEFAULT_BASELINES = {"SoftEel-v0": "pid", "SoftWorm-v0": "inching-pid"}
 CONFIGS = CONFIG_DIR / "algorithm"
+
+#: The metrics (registry names) of each evaluation in a run's learning_curve.csv.
+CURVE_METRICS = ("return", "average_speed", "cost_of_transport")
 
 
 @dataclass(frozen=True)
@@ -148,13 +151,13 @@ HYPER_RANGES: dict[str, tuple[float | None, float | None, bool, bool, str]] = {
 def _check_range(key: str, value: Any) -> None:
     """Raise ``ConfigError`` unless hyperparameter ``key`` is within :data:`HYPER_RANGES`."""
     lo, hi, lo_open, integer, meaning = HYPER_RANGES[key]
-    number = plain_number(value, integer=integer)
-    allowed = f"{'(' if lo_open else '['}{lo}, {'inf)' if hi is None else f'{hi}]'}"
-    kind = "an integer" if integer else "a number"
-    if number is None or not math.isfinite(number) or (number <= lo if lo_open else number < lo) or (
-        hi is not None and number > hi
-    ):
-        raise ConfigError(f"hyperparameter {key} = {value!r} must be {kind} in {allowed} ({meaning})")
+    try:
+        if integer:
+            check_int(f"hyperparameter {key}", value, int(lo), hint=meaning)
+        else:
+            check_number(f"hyperparameter {key}", value, lo, hi, lo_open=lo_open)
+    except ValueError as err:
+        raise ConfigError(str(err) if integer else f"{err} ({meaning})") from None
 
 
 def _check_hyperparams(algo: str, hyper: dict[str, Any]) -> None:

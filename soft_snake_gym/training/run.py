@@ -40,7 +40,8 @@ import soft_snake_gym
 from soft_snake_gym import plots
 from soft_snake_gym.agents import latest_checkpoint
 from soft_snake_gym.config import ConfigError, load_yaml
-from soft_snake_gym.training.config import TrainConfig, load_train_config
+from soft_snake_gym.evaluation import metric_columns
+from soft_snake_gym.training.config import CURVE_METRICS, TrainConfig, load_train_config
 
 __all__ = [
     "NO_CHECKOUT",
@@ -258,4 +259,4 @@ def plot_learning_curve(run_dir: str | Path, out: str | Path | None = None) -> P
         raise ConfigError(f"{run_dir / 'learning_curve.csv'} has no evaluations yet")
     cfg = load_train_config(next(iter(load_yaml(run_dir / "config.yaml"))), path=run_dir / "config.yaml")
     out = Path(out) if out is not None else run_dir / "learning_curve.png"
-    return plots.learning_curve(rows, cfg, out)
+    return plots.learning_curve(rows, cfg, metric_columns(CURVE_METRICS[1:]), out)
