@@ -38,7 +38,9 @@ def gait_actions(env: gym.Env, steps: int = 1000) -> np.ndarray:
     t = (np.arange(steps) + 0.5) * u.dt
     if env.spec.id == "SoftEel-v0":
         n, alpha, omega = u.N - 2, math.pi / 6, 2 * math.pi / 3
-        rates = np.array([serpenoid(serpenoid_phase(ti, n, omega, 2 * math.pi / n), omega, alpha)[1] for ti in t])
+        rates = np.array(
+            [serpenoid(serpenoid_phase(ti, n, omega, 2 * math.pi / n), omega, alpha)[1] for ti in t]
+        )
         return (rates / u.max_curvature_rate).astype(np.float32)
     l0 = u.sim.config.rod.edge_length
     rates = np.array([length_wave(ti, u.N - 1, l0, 0.3, 2 * math.pi, math.pi / 4)[1] for ti in t])
@@ -106,10 +108,18 @@ def main() -> None:
         sim_rate = time_sim(env, sources["gait"], args.seconds)
         env_rate = next(r["steps_per_s"] for r in results if r["env"] == env_id and r["actions"] == "gait")
         overhead = 1e6 / env_rate - 1e6 / sim_rate
-        results.append({"env": env_id, "actions": "gait (bare Simulator.step)", "steps_per_s": sim_rate,
-                        "env_overhead_us": overhead})
-        print(f"{env_id:<12} {'sim':<7} {sim_rate:>12.0f}   (bare Simulator.step; env overhead "
-              f"{overhead:.1f} us/step)")
+        results.append(
+            {
+                "env": env_id,
+                "actions": "gait (bare Simulator.step)",
+                "steps_per_s": sim_rate,
+                "env_overhead_us": overhead,
+            }
+        )
+        print(
+            f"{env_id:<12} {'sim':<7} {sim_rate:>12.0f}   (bare Simulator.step; env overhead "
+            f"{overhead:.1f} us/step)"
+        )
         env.close()
     if args.json:
         with open(args.json, "w") as fh:

@@ -35,8 +35,9 @@ def make(medium: str, method: str, N: int) -> tuple[Simulator, np.ndarray, np.nd
         times = np.arange(round(2 * np.pi / omega / h)) * h
         k0, _ = serpenoid(serpenoid_phase(0.0, N - 2, omega, delta), omega, alpha)
         sim.reset(x=body_from_curvature(k0, sim.lbar), kbar=k0)
-        u_k = np.array([serpenoid(serpenoid_phase(t + h / 2, N - 2, omega, delta), omega, alpha)[1]
-                        for t in times])
+        u_k = np.array(
+            [serpenoid(serpenoid_phase(t + h / 2, N - 2, omega, delta), omega, alpha)[1] for t in times]
+        )
         return sim, u_k, np.zeros((len(times), N - 1))
     eps, omega, delta = 0.2, np.pi, 2 * np.pi / (N - 1)
     times = np.arange(round(2 * np.pi / omega / h)) * h
@@ -63,9 +64,15 @@ def run(medium: str, method: str, N: int, chunk: int, seconds: float) -> dict:
     wall = time.perf_counter() - start
     rate = steps / wall
     return {
-        "medium": medium, "method": method, "N": N, "call": "step()" if chunk == 1 else f"advance({chunk})",
-        "substeps": sim.substeps, "steps_per_s": rate, "sim_s_per_wall_s": rate * sim.h,
-        "us_per_step": 1e6 / rate, "newton_iterations_last": sim.newton_iterations,
+        "medium": medium,
+        "method": method,
+        "N": N,
+        "call": "step()" if chunk == 1 else f"advance({chunk})",
+        "substeps": sim.substeps,
+        "steps_per_s": rate,
+        "sim_s_per_wall_s": rate * sim.h,
+        "us_per_step": 1e6 / rate,
+        "newton_iterations_last": sim.newton_iterations,
     }
 
 
@@ -74,8 +81,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=1.0, help="timing per case [s]")
     parser.add_argument("--json", help="also write the results to this JSON file")
     args = parser.parse_args()
-    cases = [(m, meth, N) for m in ("water", "ground") for meth in ("backward_euler", "symplectic_euler")
-             for N in (10, 50, 200)]
+    cases = [
+        (m, meth, N)
+        for m in ("water", "ground")
+        for meth in ("backward_euler", "symplectic_euler")
+        for N in (10, 50, 200)
+    ]
     rows = []
     header = f"{'medium':7s} {'integrator':17s} {'N':>4s} {'call':12s} {'sub':>4s} {'steps/s':>10s} {'sim s/wall s':>13s} {'us/step':>9s} {'us/step/node':>13s}"
     print(header)
@@ -84,8 +95,10 @@ def main() -> None:
         for chunk in (1, 10):
             r = run(medium, method, N, chunk, args.seconds)
             rows.append(r)
-            print(f"{medium:7s} {method:17s} {N:4d} {r['call']:12s} {r['substeps']:4d} {r['steps_per_s']:10.0f} "
-                  f"{r['sim_s_per_wall_s']:13.1f} {r['us_per_step']:9.2f} {r['us_per_step'] / N:13.3f}")
+            print(
+                f"{medium:7s} {method:17s} {N:4d} {r['call']:12s} {r['substeps']:4d} {r['steps_per_s']:10.0f} "
+                f"{r['sim_s_per_wall_s']:13.1f} {r['us_per_step']:9.2f} {r['us_per_step'] / N:13.3f}"
+            )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=2)

@@ -20,8 +20,13 @@ OUT = Path(__file__).resolve().parents[1] / "docs" / "img" / "softeel_frame.png"
 
 
 def main(seconds: float = 2.0, alpha: float = math.pi / 4, omega: float = math.pi) -> Path:
-    env = gym.make("SoftEel-v0", render_mode="rgb_array", initial_shape="serpenoid",
-                   serpenoid_alpha=alpha, reset_noise_scale=0.0)
+    env = gym.make(
+        "SoftEel-v0",
+        render_mode="rgb_array",
+        initial_shape="serpenoid",
+        serpenoid_alpha=alpha,
+        reset_noise_scale=0.0,
+    )
     env.reset(seed=0)
     u = env.unwrapped
     n = u.N - 2

@@ -67,10 +67,26 @@ def main() -> None:
         for name in ("config.yaml", "command.txt", "meta.json", "learning_curve.csv"):
             shutil.copy(run / name, dest / name)
         plot_learning_curve(run, DOCS / f"learning_curve_{env_id}.png")
-    soft_snake("compare", "SoftEel-v0", "--episodes", "10", "--out", str(DOCS / "compare_SoftEel-v0.png"),
-               "--json", str(DOCS / "compare_SoftEel-v0.json"))
-    soft_snake("compare", "SoftWorm-v0", "--episodes", "10", "--out", str(DOCS / "compare_SoftWorm-v0.png"),
-               "--json", str(DOCS / "compare_SoftWorm-v0.json"))
+    soft_snake(
+        "compare",
+        "SoftEel-v0",
+        "--episodes",
+        "10",
+        "--out",
+        str(DOCS / "compare_SoftEel-v0.png"),
+        "--json",
+        str(DOCS / "compare_SoftEel-v0.json"),
+    )
+    soft_snake(
+        "compare",
+        "SoftWorm-v0",
+        "--episodes",
+        "10",
+        "--out",
+        str(DOCS / "compare_SoftWorm-v0.png"),
+        "--json",
+        str(DOCS / "compare_SoftWorm-v0.json"),
+    )
 
 
 if __name__ == "__main__":

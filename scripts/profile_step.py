@@ -56,7 +56,9 @@ def _loop_copy(k, J, Jw, b, bw):
 def _loop_check(k, q, v, kbar, lbar, uk, ul, prm, buf, ibuf):
     s = 0.0
     for _ in range(k):
-        s += stepper.check_state(q, v, lbar, prm, buf, ibuf) + forces.actuator_power(q, kbar, lbar, uk, ul, prm)
+        s += stepper.check_state(q, v, lbar, prm, buf, ibuf) + forces.actuator_power(
+            q, kbar, lbar, uk, ul, prm
+        )
     return s
 
 
@@ -100,8 +102,10 @@ def main() -> None:
     for kind in ("random", "gait"):
         frac = newton_iterations(kind)
         mean = float(frac @ np.arange(frac.size))
-        print(f"Newton iterations per step, {kind} actions: mean {mean:.2f}; "
-              + ", ".join(f"{i}: {100 * f:.0f} %" for i, f in enumerate(frac) if f > 0))
+        print(
+            f"Newton iterations per step, {kind} actions: mean {mean:.2f}; "
+            + ", ".join(f"{i}: {100 * f:.0f} %" for i, f in enumerate(frac) if f > 0)
+        )
 
     env = gym.make("SoftEel-v0")
     env.reset(seed=0)
@@ -116,17 +120,25 @@ def main() -> None:
     Jw, b, bw = np.empty_like(J), np.ones(q.size), np.empty(q.size)
     A = rng.uniform(-1, 1, (64, 8))
     parts = {
-        "whole robot_step (random actions)": _us(_loop_step, A, SimArrays(*(a.copy() for a in sa)),
-                                                 type(u.task)(*(a.copy() for a in u.task)), k=5000),
-        "residual + Jacobian (assemble, drag, added mass)": _us(_loop_residual, SimArrays(*(a.copy() for a in sa)),
-                                                                True),
+        "whole robot_step (random actions)": _us(
+            _loop_step,
+            A,
+            SimArrays(*(a.copy() for a in sa)),
+            type(u.task)(*(a.copy() for a in u.task)),
+            k=5000,
+        ),
+        "residual + Jacobian (assemble, drag, added mass)": _us(
+            _loop_residual, SimArrays(*(a.copy() for a in sa)), True
+        ),
         "residual only (line-search trial)": _us(_loop_residual, SimArrays(*(a.copy() for a in sa)), False),
-        "banded LU + solve (2N = 20, KL = KU = 5)": _us(_loop_lu, J, Jw, piv, b, bw) - _us(_loop_copy, J, Jw, b, bw),
-        "state check + actuator power": _us(_loop_check, q, v, kbar, lbar, u.task.uk, u.task.ul, prm, buf.copy(),
-                                            ibuf.copy()),
-        "observation (kappa, kappa_dot, kbar, body velocity)": _us(_loop_observe, q, v, kbar, u.task.w, u.task.low,
-                                                                   u.task.high, u.task.raw.copy(),
-                                                                   u.task.obs.copy()),
+        "banded LU + solve (2N = 20, KL = KU = 5)": _us(_loop_lu, J, Jw, piv, b, bw)
+        - _us(_loop_copy, J, Jw, b, bw),
+        "state check + actuator power": _us(
+            _loop_check, q, v, kbar, lbar, u.task.uk, u.task.ul, prm, buf.copy(), ibuf.copy()
+        ),
+        "observation (kappa, kappa_dot, kbar, body velocity)": _us(
+            _loop_observe, q, v, kbar, u.task.w, u.task.low, u.task.high, u.task.raw.copy(), u.task.obs.copy()
+        ),
     }
     print("\nCompiled parts, microseconds per call (in a compiled loop, no dispatch):")
     for name, us in parts.items():

@@ -71,7 +71,9 @@ def load_model(path: str | Path, env: Any) -> Any:
         if path.suffix != ".zip" and alt.is_file():
             path = alt
         else:
-            raise ConfigError(f"model file {str(path)!r} does not exist; pass the .zip that model.save() wrote")
+            raise ConfigError(
+                f"model file {str(path)!r} does not exist; pass the .zip that model.save() wrote"
+            )
     import stable_baselines3 as sb3  # here, not at the top: importing SB3 (torch) costs seconds
 
     errors = []
@@ -112,8 +114,14 @@ class TrainedPolicy:
         name: shown by ``repr``.
     """
 
-    def __init__(self, model: Any, obs_rms: Any | None, clip_obs: float = 10.0, epsilon: float = 1e-8,
-                 name: str = "trained") -> None:
+    def __init__(
+        self,
+        model: Any,
+        obs_rms: Any | None,
+        clip_obs: float = 10.0,
+        epsilon: float = 1e-8,
+        name: str = "trained",
+    ) -> None:
         self.model = model
         self.obs_rms = obs_rms
         self.clip_obs = clip_obs
@@ -126,13 +134,17 @@ class TrainedPolicy:
         """Observations as ``VecNormalize`` gave them to the model in training."""
         if self.obs_rms is None:
             return obs
-        return np.clip((obs - self.obs_rms.mean) / np.sqrt(self.obs_rms.var + self.epsilon),
-                       -self.clip_obs, self.clip_obs).astype(np.float32)
+        return np.clip(
+            (obs - self.obs_rms.mean) / np.sqrt(self.obs_rms.var + self.epsilon),
+            -self.clip_obs,
+            self.clip_obs,
+        ).astype(np.float32)
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
         """SB3's ``predict`` on raw observations."""
-        return self.model.predict(self.normalize(np.asarray(observation)), state, episode_start,
-                                  deterministic)
+        return self.model.predict(
+            self.normalize(np.asarray(observation)), state, episode_start, deterministic
+        )
 
     def __repr__(self) -> str:
         return f"TrainedPolicy({self.name})"
@@ -140,8 +152,9 @@ class TrainedPolicy:
 
 def latest_checkpoint(run_dir: Path) -> tuple[Path, Path | None] | None:
     """The newest checkpoint of a run folder (model zip, VecNormalize pickle or None)."""
-    ckpts = sorted((run_dir / "checkpoints").glob("model_*_steps.zip"),
-                   key=lambda p: int(p.stem.split("_")[1]))
+    ckpts = sorted(
+        (run_dir / "checkpoints").glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1])
+    )
     if not ckpts:
         return None
     model = ckpts[-1]
@@ -152,9 +165,11 @@ def latest_checkpoint(run_dir: Path) -> tuple[Path, Path | None] | None:
 def _find_model(path: Path) -> tuple[Path, Path | None]:
     """The model zip and its VecNormalize statistics for a run folder or a zip."""
     if path.is_dir():
-        for name, stats in (("best_model.zip", "best_vecnormalize.pkl"),
-                            ("final_model.zip", "vecnormalize.pkl"),
-                            ("model.zip", "vecnormalize.pkl")):
+        for name, stats in (
+            ("best_model.zip", "best_vecnormalize.pkl"),
+            ("final_model.zip", "vecnormalize.pkl"),
+            ("model.zip", "vecnormalize.pkl"),
+        ):
             if (path / name).is_file():
                 return path / name, (path / stats if (path / stats).is_file() else None)
         ckpt = latest_checkpoint(path)
@@ -164,9 +179,13 @@ def _find_model(path: Path) -> tuple[Path, Path | None]:
             f"run folder {str(path)!r} holds no model (best_model.zip, final_model.zip or a checkpoint)"
         )
     if not path.is_file():
-        raise ConfigError(f"model {str(path)!r} does not exist; give a run folder or a .zip written by training")
-    for stats in (path.with_name(path.stem.replace("model", "vecnormalize") + ".pkl"),
-                  path.parent / "vecnormalize.pkl"):
+        raise ConfigError(
+            f"model {str(path)!r} does not exist; give a run folder or a .zip written by training"
+        )
+    for stats in (
+        path.with_name(path.stem.replace("model", "vecnormalize") + ".pkl"),
+        path.parent / "vecnormalize.pkl",
+    ):
         if stats.is_file() and stats != path:
             return path, stats
     return path, None
@@ -195,7 +214,9 @@ def zoo_path(env_id: str, algo: str) -> Path:
     """The folder of the agent shipped with the package for ``env_id`` and ``algo``."""
     path = ZOO / env_id / algo.lower()
     if not (path / "model.zip").is_file():
-        shipped = sorted(f"zoo:{p.name} on {p.parent.name}" for p in ZOO.glob("*/*") if (p / "model.zip").is_file())
+        shipped = sorted(
+            f"zoo:{p.name} on {p.parent.name}" for p in ZOO.glob("*/*") if (p / "model.zip").is_file()
+        )
         raise ConfigError(
             f"no shipped {algo.lower()} agent for {env_id}; shipped agents: {', '.join(shipped) or 'none'}"
         )

@@ -137,8 +137,18 @@ def _ppo_settings(env_id: str) -> tuple[int, dict[str, Any], dict[str, Any]]:
     cfg = dict(load_yaml(shipped_configs("algorithm")["ppo"])[env_id])
     n_envs = int(cfg.pop("n_envs", 8))
     env_kwargs = dict(cfg.pop("env_kwargs", {}) or {})
-    run_keys = ("n_timesteps", "normalize", "policy", "vec_env", "eval_freq", "eval_episodes",
-                "eval_seed", "checkpoint_freq", "baseline", "seed")
+    run_keys = (
+        "n_timesteps",
+        "normalize",
+        "policy",
+        "vec_env",
+        "eval_freq",
+        "eval_episodes",
+        "eval_seed",
+        "checkpoint_freq",
+        "baseline",
+        "seed",
+    )
     for key in run_keys:
         cfg.pop(key, None)
     return n_envs, cfg, env_kwargs
@@ -174,9 +184,16 @@ def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict
         elapsed = time.perf_counter() - start
     finally:
         env.close()
-    return {"kind": kind, "n_envs": n_envs, "timesteps": timesteps, "seconds": elapsed,
-            "steps_per_s": timesteps / elapsed, "n_steps": ppo_kwargs.get("n_steps"),
-            "batch_size": ppo_kwargs.get("batch_size"), "n_epochs": ppo_kwargs.get("n_epochs")}
+    return {
+        "kind": kind,
+        "n_envs": n_envs,
+        "timesteps": timesteps,
+        "seconds": elapsed,
+        "steps_per_s": timesteps / elapsed,
+        "n_steps": ppo_kwargs.get("n_steps"),
+        "batch_size": ppo_kwargs.get("batch_size"),
+        "n_epochs": ppo_kwargs.get("n_epochs"),
+    }
 
 
 # --- cost against N -------------------------------------------------------------------------
@@ -197,8 +214,13 @@ def time_nodes(N: int, robots: int, seconds: float) -> dict[str, Any]:
             steps += 1
     elapsed = time.perf_counter() - start
     us = elapsed / (steps * robots) * 1e6
-    return {"N": N, "robots": robots, "us_per_robot_step": us, "us_per_node_step": us / N,
-            "mean_newton_iterations": iters / steps}
+    return {
+        "N": N,
+        "robots": robots,
+        "us_per_robot_step": us,
+        "us_per_node_step": us / N,
+        "mean_newton_iterations": iters / steps,
+    }
 
 
 # --- the run ----------------------------------------------------------------------------------
@@ -244,8 +266,14 @@ def run_benchmark(
             rates[name].append(case.run(seconds))
     rows = []
     for name, case in cases.items():
-        rows.append({"case": name, "robots": case.robots, "steps_per_s": statistics.median(rates[name]),
-                     "rounds": rates[name]})
+        rows.append(
+            {
+                "case": name,
+                "robots": case.robots,
+                "steps_per_s": statistics.median(rates[name]),
+                "rounds": rates[name],
+            }
+        )
     shares = {}
     for n in robots:
         name = f"SoftEel-v0 batched n={n} threads=1"
@@ -265,11 +293,20 @@ def run_benchmark(
         node_rows.append(time_nodes(N, node_robots, seconds))
 
     res: dict[str, Any] = {
-        "machine": {"platform": platform.platform(), "processor": platform.processor(),
-                    "cpus": os.cpu_count(), "numba_threads": all_threads,
-                    "threading_layer": _threading_layer()},
-        "settings": {"seconds": seconds, "repeats": repeats, "sync_robots": sync_robots,
-                     "ppo_timesteps": ppo_timesteps, "node_robots": node_robots},
+        "machine": {
+            "platform": platform.platform(),
+            "processor": platform.processor(),
+            "cpus": os.cpu_count(),
+            "numba_threads": all_threads,
+            "threading_layer": _threading_layer(),
+        },
+        "settings": {
+            "seconds": seconds,
+            "repeats": repeats,
+            "sync_robots": sync_robots,
+            "ppo_timesteps": ppo_timesteps,
+            "node_robots": node_robots,
+        },
         "throughput": rows,
         "kernel_share": shares,
         "ppo": ppo_rows,
@@ -295,8 +332,11 @@ def _ratios(res: dict[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     swimmer = _rate(res, "Swimmer-v5 gym.make")
     single = _rate(res, "SoftEel-v0 gym.make")
-    batched = {r["case"]: r["steps_per_s"] for r in res["throughput"]
-               if "batched n=256" in r["case"] and "gait" not in r["case"]}
+    batched = {
+        r["case"]: r["steps_per_s"]
+        for r in res["throughput"]
+        if "batched n=256" in r["case"] and "gait" not in r["case"]
+    }
     gait = _rate(res, "SoftEel-v0 batched n=256 threads=1, gait actions")
     if swimmer:
         out["single_vs_swimmer"] = single / swimmer
@@ -307,7 +347,9 @@ def _ratios(res: dict[str, Any]) -> dict[str, Any]:
             best = max(batched, key=batched.get)
             out["batched256_vs_swimmer"] = batched[best] / swimmer
             out["batched256_best_case"] = best
-            out["batched256_1thread_vs_swimmer"] = batched.get("SoftEel-v0 batched n=256 threads=1", 0) / swimmer
+            out["batched256_1thread_vs_swimmer"] = (
+                batched.get("SoftEel-v0 batched n=256 threads=1", 0) / swimmer
+            )
         if gait:
             out["batched256_gait_vs_swimmer"] = gait / swimmer
     ppo = {r["kind"]: r["steps_per_s"] for r in res["ppo"]}
@@ -324,8 +366,10 @@ def _ratios(res: dict[str, Any]) -> dict[str, Any]:
 
 def format_report(res: dict[str, Any]) -> str:
     """The results as plain-text tables with the ratios and the targets."""
-    lines = [f"machine: {res['machine']['platform']}, {res['machine']['cpus']} CPUs, numba threads "
-             f"{res['machine']['numba_threads']} ({res['machine']['threading_layer']})"]
+    lines = [
+        f"machine: {res['machine']['platform']}, {res['machine']['cpus']} CPUs, numba threads "
+        f"{res['machine']['numba_threads']} ({res['machine']['threading_layer']})"
+    ]
     if res["mujoco"] != "installed":
         lines.append(f"Swimmer-v5 rows skipped: {res['mujoco']}")
     swimmer = _rate(res, "Swimmer-v5 gym.make")
@@ -345,14 +389,18 @@ def format_report(res: dict[str, Any]) -> str:
     if res["nodes"]:
         lines += ["", f"{'N':>4} {'us/robot-step':>14} {'us/node-step':>13} {'Newton its':>11}"]
         for r in res["nodes"]:
-            lines.append(f"{r['N']:>4} {r['us_per_robot_step']:>14.2f} {r['us_per_node_step']:>13.3f} "
-                         f"{r['mean_newton_iterations']:>11.2f}")
+            lines.append(
+                f"{r['N']:>4} {r['us_per_robot_step']:>14.2f} {r['us_per_node_step']:>13.3f} "
+                f"{r['mean_newton_iterations']:>11.2f}"
+            )
     ratios = res["ratios"]
     lines += ["", "targets (ratios measured in this run):"]
-    names = {"single_vs_swimmer": "SoftEel-v0 single env / Swimmer-v5 single env",
-             "worm_single_vs_swimmer": "SoftWorm-v0 single env / Swimmer-v5 single env",
-             "batched256_vs_swimmer": "batched env, 256 robots / Swimmer-v5 single env",
-             "ppo_batched_vs_subproc": "PPO steps/s, batched / SubprocVecEnv"}
+    names = {
+        "single_vs_swimmer": "SoftEel-v0 single env / Swimmer-v5 single env",
+        "worm_single_vs_swimmer": "SoftWorm-v0 single env / Swimmer-v5 single env",
+        "batched256_vs_swimmer": "batched env, 256 robots / Swimmer-v5 single env",
+        "ppo_batched_vs_subproc": "PPO steps/s, batched / SubprocVecEnv",
+    }
     for key, target in TARGETS.items():
         if key in ratios:
             ok = "met" if ratios[key] >= target else f"MISSED by {100 * (1 - ratios[key] / target):.0f} %"
@@ -360,12 +408,18 @@ def format_report(res: dict[str, Any]) -> str:
         else:
             lines.append(f"  {names[key]:<50}   n/a  (not measured)")
     if "batched256_1thread_vs_swimmer" in ratios:
-        lines.append(f"    (random actions; one thread: {ratios['batched256_1thread_vs_swimmer']:.2f}x; best: "
-                     f"{ratios['batched256_best_case']})")
+        lines.append(
+            f"    (random actions; one thread: {ratios['batched256_1thread_vs_swimmer']:.2f}x; best: "
+            f"{ratios['batched256_best_case']})"
+        )
     if "batched256_gait_vs_swimmer" in ratios:
-        lines.append(f"    (with the thesis gait instead of random actions: {ratios['batched256_gait_vs_swimmer']:.2f}x)")
+        lines.append(
+            f"    (with the thesis gait instead of random actions: {ratios['batched256_gait_vs_swimmer']:.2f}x)"
+        )
     if "cost_growth_vs_linear" in ratios:
         g = ratios["cost_growth_vs_linear"]
-        lines.append(f"  cost per robot step, N = {res['nodes'][-1]['N']} vs {res['nodes'][0]['N']}, over linear: "
-                     f"{g:.2f} ({'no faster than linear' if g <= 1.05 else 'FASTER than linear'})")
+        lines.append(
+            f"  cost per robot step, N = {res['nodes'][-1]['N']} vs {res['nodes'][0]['N']}, over linear: "
+            f"{g:.2f} ({'no faster than linear' if g <= 1.05 else 'FASTER than linear'})"
+        )
     return "\n".join(lines)

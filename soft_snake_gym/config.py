@@ -67,7 +67,9 @@ class _Loader(yaml.SafeLoader):
                 continue
             if first is not key_node.start_mark:
                 raise yaml.constructor.ConstructorError(
-                    None, None, f"duplicate key {key!r} (first given on line {first.line + 1})",
+                    None,
+                    None,
+                    f"duplicate key {key!r} (first given on line {first.line + 1})",
                     key_node.start_mark,
                 )
         return super().construct_mapping(node, deep=deep)
@@ -106,9 +108,7 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
         if mark is not None:
             where = f" at line {mark.line + 1}, column {mark.column + 1}"
         problem = getattr(err, "problem", None) or str(err).splitlines()[0]
-        raise ConfigError(
-            f"config file {str(path)!r} is not valid YAML{where}: {problem}"
-        ) from None
+        raise ConfigError(f"config file {str(path)!r} is not valid YAML{where}: {problem}") from None
     if data is None:
         return {}
     if not isinstance(data, dict):
@@ -217,7 +217,7 @@ def _with_range(cls: type, key: str, value: Any, where: str) -> str | None:
         own = f"{cls.__name__}.{key} = "
         message = str(err)
         if message.startswith(own):
-            return f"{where}.{key} = {message[len(own):]}"
+            return f"{where}.{key} = {message[len(own) :]}"
     return None
 
 
@@ -275,8 +275,9 @@ def parse_value(text: str) -> Any:
     return s if isinstance(value, str) else value
 
 
-def parse_assignments(items: Iterable[str] | None, usage: str, nested: bool = True,
-                      sep: str | None = None) -> dict[str, Any]:
+def parse_assignments(
+    items: Iterable[str] | None, usage: str, nested: bool = True, sep: str | None = None
+) -> dict[str, Any]:
     """``key=value`` items as a mapping, values by :func:`parse_value`.
 
     Args:
@@ -337,8 +338,13 @@ def config_path(config: str | Path, kind: str) -> Path:
     """
     path = Path(config)
     text = str(config)
-    if isinstance(config, Path) or path.suffix in (".yaml", ".yml") or "/" in text or "\\" in text \
-            or path.exists():
+    if (
+        isinstance(config, Path)
+        or path.suffix in (".yaml", ".yml")
+        or "/" in text
+        or "\\" in text
+        or path.exists()
+    ):
         return path
     shipped = shipped_configs(kind)
     if text in shipped:

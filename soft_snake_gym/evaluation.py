@@ -38,11 +38,25 @@ import numpy as np
 
 from soft_snake_gym.envs import register_envs
 
-__all__ = ["EpisodeRecorder", "evaluate", "make_eval_env", "summarize", "format_table", "COLUMNS", "METRICS",
-           "Metric", "TABLE", "metric_columns", "check_video_path", "check_transient", "gait_rate_warning"]
+__all__ = [
+    "EpisodeRecorder",
+    "evaluate",
+    "make_eval_env",
+    "summarize",
+    "format_table",
+    "COLUMNS",
+    "METRICS",
+    "Metric",
+    "TABLE",
+    "metric_columns",
+    "check_video_path",
+    "check_transient",
+    "gait_rate_warning",
+]
 
 VIDEO_FPS = 25
 """Frames per second of ``--video`` (the env renders only the frames kept)."""
+
 
 @dataclass(frozen=True)
 class Metric:
@@ -80,27 +94,46 @@ class Metric:
 #: ``episode_speed`` is the env's ``info["metrics"]["average_speed"]``, progress along the goal
 #: over the whole episode divided by its duration (``distance / duration``). Both keys stay as
 #: they are (files and ``info`` keep their meaning); code that means one of them names it here.
-METRICS: dict[str, Metric] = {m.name: m for m in (
-    Metric("return", "return", "-", "episode"),
-    Metric("average_speed", "average speed", "m/s", "transient"),
-    Metric("com_speed", "centre-of-mass speed", "m/s", "transient"),
-    Metric("distance", "distance", "m", "episode"),
-    Metric("curvature_error", "curvature error", "-", "transient"),
-    Metric("length_error", "length error", "m", "transient"),
-    Metric("mean_fluid_power", "fluid power", "W", "episode"),
-    Metric("window_fluid_power", "fluid power after the transient", "W", "transient"),
-    Metric("energy_fluid", "fluid energy", "J", "episode"),
-    Metric("energy_friction", "friction energy", "J", "episode"),
-    Metric("energy_actuator", "actuator energy", "J", "episode"),
-    Metric("cost_of_transport", "cost of transport", "-", "episode"),
-    Metric("duration", "duration", "s", "episode"),
-    Metric("episode_speed", "average speed over the episode", "m/s", "episode", source="env",
-           key="average_speed"),
-)}
+METRICS: dict[str, Metric] = {
+    m.name: m
+    for m in (
+        Metric("return", "return", "-", "episode"),
+        Metric("average_speed", "average speed", "m/s", "transient"),
+        Metric("com_speed", "centre-of-mass speed", "m/s", "transient"),
+        Metric("distance", "distance", "m", "episode"),
+        Metric("curvature_error", "curvature error", "-", "transient"),
+        Metric("length_error", "length error", "m", "transient"),
+        Metric("mean_fluid_power", "fluid power", "W", "episode"),
+        Metric("window_fluid_power", "fluid power after the transient", "W", "transient"),
+        Metric("energy_fluid", "fluid energy", "J", "episode"),
+        Metric("energy_friction", "friction energy", "J", "episode"),
+        Metric("energy_actuator", "actuator energy", "J", "episode"),
+        Metric("cost_of_transport", "cost of transport", "-", "episode"),
+        Metric("duration", "duration", "s", "episode"),
+        Metric(
+            "episode_speed",
+            "average speed over the episode",
+            "m/s",
+            "episode",
+            source="env",
+            key="average_speed",
+        ),
+    )
+}
 
 #: The metrics of ``soft-snake evaluate``'s table, in order; rows whose key is absent are skipped.
-TABLE = ("return", "average_speed", "distance", "curvature_error", "length_error", "mean_fluid_power",
-         "energy_fluid", "energy_friction", "energy_actuator", "cost_of_transport")
+TABLE = (
+    "return",
+    "average_speed",
+    "distance",
+    "curvature_error",
+    "length_error",
+    "mean_fluid_power",
+    "energy_fluid",
+    "energy_friction",
+    "energy_actuator",
+    "cost_of_transport",
+)
 
 #: (key, label, unit) of the summary table, in order (from :data:`METRICS`).
 COLUMNS = [(METRICS[n].key, METRICS[n].label, METRICS[n].unit) for n in TABLE]
@@ -364,9 +397,11 @@ def gait_rate_warning(policy: Any, env: Any) -> str | None:
         return None
     if peak <= limit * (1 + 1e-9):
         return None
-    return (f"the {gait} gait needs input rates up to {peak:.3g} {unit}, beyond the env's {name} = "
-            f"{limit:.3g} {unit}: the actions saturate and the robot does not follow the gait; "
-            f"raise {name} (--env-kwarg {name}={peak * 1.05:.3g}) or slow the gait")
+    return (
+        f"the {gait} gait needs input rates up to {peak:.3g} {unit}, beyond the env's {name} = "
+        f"{limit:.3g} {unit}: the actions saturate and the robot does not follow the gait; "
+        f"raise {name} (--env-kwarg {name}={peak * 1.05:.3g}) or slow the gait"
+    )
 
 
 def write_video(frames: list[np.ndarray], path: str | Path, fps: int = 50, stride: int = 1) -> Path:

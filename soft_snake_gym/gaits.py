@@ -90,8 +90,9 @@ def serpenoid_on_nodes(
     return alpha * ratio, delta * ratio, gamma * ratio
 
 
-def serpenoid(psi: np.ndarray, psi_dot: float | np.ndarray, alpha: float, gamma: float = 0.0
-              ) -> tuple[np.ndarray, np.ndarray]:
+def serpenoid(
+    psi: np.ndarray, psi_dot: float | np.ndarray, alpha: float, gamma: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Desired curvature and its rate at phases ``psi`` (docs/model.md §6).
 
     ``phi_des = alpha sin(psi) + gamma``, ``kappa_des = 2 tan(phi_des / 2)``,
@@ -126,8 +127,9 @@ def max_serpenoid_amplitude(n_nodes: int, delta: float, gamma: float = 0.0) -> f
     return lo
 
 
-def length_wave(t: float, n_edges: int, l0: float, eps: float, omega: float, delta_l: float,
-                direction: int = 1) -> tuple[np.ndarray, np.ndarray]:
+def length_wave(
+    t: float, n_edges: int, l0: float, eps: float, omega: float, delta_l: float, direction: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
     """Compression wave of the rest lengths (docs/model.md §6).
 
     ``lbar_des,k = l0 (1 - eps (1 + sin(omega t - direction delta_l k)) / 2)``; with
@@ -142,8 +144,16 @@ def length_wave(t: float, n_edges: int, l0: float, eps: float, omega: float, del
     return l0 * (1.0 - 0.5 * eps * (1.0 + np.sin(arg))), -0.5 * l0 * eps * omega * np.cos(arg)
 
 
-def pulse_wave(t: float, n_edges: int, l0: float, eps: float, omega: float, delta_l: float,
-               duty: float, direction: int = 1) -> tuple[np.ndarray, np.ndarray]:
+def pulse_wave(
+    t: float,
+    n_edges: int,
+    l0: float,
+    eps: float,
+    omega: float,
+    delta_l: float,
+    duty: float,
+    direction: int = 1,
+) -> tuple[np.ndarray, np.ndarray]:
     """Peristaltic pulse of the rest lengths (docs/model.md §6): a raised-cosine compression pulse
     that occupies a fraction ``duty`` of each period, the rest of the time at ``l0``.
 

@@ -13,8 +13,17 @@ import numbers
 from dataclasses import InitVar, dataclass, fields
 from typing import Any, Literal
 
-__all__ = ["Rod", "Fluid", "Ground", "Integrator", "SimConfig", "Medium", "check_int", "check_number",
-           "plain_number"]
+__all__ = [
+    "Rod",
+    "Fluid",
+    "Ground",
+    "Integrator",
+    "SimConfig",
+    "Medium",
+    "check_int",
+    "check_number",
+    "plain_number",
+]
 
 Medium = Literal["water", "ground", "none"]
 
@@ -33,8 +42,14 @@ def plain_number(value: Any, integer: bool = False) -> int | float | None:
     return None if integer else float(value)
 
 
-def check_number(where: str, value: Any, lo: float | None = None, hi: float | None = None,
-                 lo_open: bool = False, hi_open: bool = False) -> int | float:
+def check_number(
+    where: str,
+    value: Any,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> int | float:
     """The one validator of a real number: ``value`` as a Python number if it is a finite number
     within [lo, hi] (open ends with ``lo_open``/``hi_open``; ``None``: unbounded), else
     ``ValueError`` naming ``where`` (e.g. ``"Rod.E"``), the value and the allowed range."""
@@ -56,8 +71,14 @@ def check_number(where: str, value: Any, lo: float | None = None, hi: float | No
     return number
 
 
-def _check(owner: object, name: str, lo: float | None = None, hi: float | None = None,
-           lo_open: bool = False, hi_open: bool = False) -> None:
+def _check(
+    owner: object,
+    name: str,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> None:
     """:func:`check_number` on the field ``owner.name``; a numpy scalar becomes a Python number."""
     value = getattr(owner, name)
     number = check_number(f"{type(owner).__name__}.{name}", value, lo, hi, lo_open, hi_open)
@@ -72,7 +93,9 @@ def check_int(where: str, value: Any, lo: int, hi: int | None = None, hint: str 
     number = plain_number(value, integer=True)
     if number is None or number < lo or (hi is not None and number > hi):
         allowed = f"[{lo}, {'inf' if hi is None else hi}]"
-        raise ValueError(f"{where} = {value!r} must be an integer in {allowed}" + (f" ({hint})" if hint else ""))
+        raise ValueError(
+            f"{where} = {value!r} must be an integer in {allowed}" + (f" ({hint})" if hint else "")
+        )
     return number
 
 
@@ -313,7 +336,9 @@ class Ground:
     @property
     def kinetic(self) -> tuple[float, float, float]:
         """(forward, backward, lateral) kinetic coefficients, ``mu_d`` where not set."""
-        return tuple(self.mu_d if c is None else c for c in (self.mu_forward, self.mu_backward, self.mu_lateral))
+        return tuple(
+            self.mu_d if c is None else c for c in (self.mu_forward, self.mu_backward, self.mu_lateral)
+        )
 
 
 @dataclass(frozen=True)
@@ -346,8 +371,7 @@ class Integrator:
     def __post_init__(self) -> None:
         if self.method not in ("backward_euler", "symplectic_euler"):
             raise ValueError(
-                f"Integrator.method = {self.method!r} is unknown; "
-                "use 'backward_euler' or 'symplectic_euler'"
+                f"Integrator.method = {self.method!r} is unknown; use 'backward_euler' or 'symplectic_euler'"
             )
         _check(self, "h", 0.0, 1.0, lo_open=True)
         if self.substeps is not None:
@@ -357,8 +381,7 @@ class Integrator:
         _check(self, "max_strain", 0.0, None, lo_open=True)
         if not isinstance(self.check_self_intersection, bool):
             raise ValueError(
-                "Integrator.check_self_intersection = "
-                f"{self.check_self_intersection!r} must be true or false"
+                f"Integrator.check_self_intersection = {self.check_self_intersection!r} must be true or false"
             )
 
 
@@ -386,6 +409,5 @@ class SimConfig:
             expected = {"rod": Rod, "fluid": Fluid, "ground": Ground, "integrator": Integrator}
             if f.name in expected and not isinstance(value, expected[f.name]):
                 raise ValueError(
-                    f"SimConfig.{f.name} must be a {expected[f.name].__name__}, "
-                    f"got {type(value).__name__}"
+                    f"SimConfig.{f.name} must be a {expected[f.name].__name__}, got {type(value).__name__}"
                 )

@@ -136,7 +136,9 @@ def sweep_heatmaps(study: Any, rows: list[dict[str, Any]], out_dir: str | Path) 
     return paths
 
 
-def swim_snapshots(trajectory: dict[str, np.ndarray], out: str | Path, title: str, snapshots: int = 12) -> Path:
+def swim_snapshots(
+    trajectory: dict[str, np.ndarray], out: str | Path, title: str, snapshots: int = 12
+) -> Path:
     """Body snapshots over a stretch of a swimming trajectory, coloured by time, with the head,
     tail and centre-of-mass traces.
 
@@ -169,8 +171,9 @@ def swim_snapshots(trajectory: dict[str, np.ndarray], out: str | Path, title: st
     return _save(fig, out, dpi=120)
 
 
-def controller_comparison(runs: dict[str, dict[str, np.ndarray]], specs: dict[str, str],
-                          errors: dict[str, float], out: str | Path) -> Path:
+def controller_comparison(
+    runs: dict[str, dict[str, np.ndarray]], specs: dict[str, str], errors: dict[str, float], out: str | Path
+) -> Path:
     """Curvature error, curvature and input per node over time, one column per controller.
 
     Args:
@@ -206,8 +209,9 @@ def controller_comparison(runs: dict[str, dict[str, np.ndarray]], specs: dict[st
     return _save(fig, out, dpi=110)
 
 
-def learning_curve(rows: list[dict[str, str]], cfg: Any, metrics: Sequence[tuple[str, str, str]],
-                   out: str | Path) -> Path:
+def learning_curve(
+    rows: list[dict[str, str]], cfg: Any, metrics: Sequence[tuple[str, str, str]], out: str | Path
+) -> Path:
     """A run's evaluations: the agent's average speed and cost of transport (mean ± std over the
     evaluation episodes) against environment steps, with the baseline's figures on the same
     seeds as horizontal lines.
@@ -228,8 +232,12 @@ def learning_curve(rows: list[dict[str, str]], cfg: Any, metrics: Sequence[tuple
         ax.plot(steps, mean, "o-", ms=3, label=f"{cfg.algo} agent")
         ax.fill_between(steps, mean - std, mean + std, alpha=0.25)
         if f"baseline_{key}" in rows[0]:
-            ax.axhline(float(rows[0][f"baseline_{key}"]), color="C3", ls="--",
-                       label=f"baseline ({cfg.baseline_spec})")
+            ax.axhline(
+                float(rows[0][f"baseline_{key}"]),
+                color="C3",
+                ls="--",
+                label=f"baseline ({cfg.baseline_spec})",
+            )
         ax.set_xlabel("environment steps")
         ax.set_ylabel(f"{label} [{unit}]")
         ax.grid(alpha=0.3)
@@ -240,8 +248,12 @@ def learning_curve(rows: list[dict[str, str]], cfg: Any, metrics: Sequence[tuple
     return _save(fig, out, dpi=110)
 
 
-def comparison_chart(results: dict[str, dict[str, tuple[float, float]]],
-                     metrics: Sequence[tuple[str, str, str]], path: str | Path, title: str = "") -> Path:
+def comparison_chart(
+    results: dict[str, dict[str, tuple[float, float]]],
+    metrics: Sequence[tuple[str, str, str]],
+    path: str | Path,
+    title: str = "",
+) -> Path:
     """Bar chart (mean with std error bars), one panel per metric, one bar per policy.
 
     Args:
@@ -272,8 +284,10 @@ def benchmark_chart(res: dict[str, Any], path: str | Path) -> Path:
     :func:`soft_snake_gym.benchmark.run_benchmark`'s result, as a PNG."""
     fig = _figure(figsize=(12, 4.8))
     ax1, ax2 = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.6, 1]})
-    rows = res["throughput"] + [{"case": f"PPO learn, {r['kind']} (n_envs={r['n_envs']})",
-                                 "steps_per_s": r["steps_per_s"]} for r in res["ppo"]]
+    rows = res["throughput"] + [
+        {"case": f"PPO learn, {r['kind']} (n_envs={r['n_envs']})", "steps_per_s": r["steps_per_s"]}
+        for r in res["ppo"]
+    ]
     names = [r["case"] for r in rows]
     vals = [r["steps_per_s"] for r in rows]
     colors = ["#1f77b4" if "SoftEel" in n else "#ff7f0e" if "Swimmer" in n else "#2ca02c" for n in names]

@@ -63,8 +63,12 @@ class SoftVecEnv(VecEnv):
         **env_kwargs: Any,
     ) -> None:
         self.venv = SoftVectorEnv(
-            env_id, n_envs, max_episode_steps=max_episode_steps, num_threads=num_threads,
-            autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs,
+            env_id,
+            n_envs,
+            max_episode_steps=max_episode_steps,
+            num_threads=num_threads,
+            autoreset_mode=AutoresetMode.SAME_STEP,
+            **env_kwargs,
         )
         self.env_id = env_id
         self.step_info = bool(step_info)
@@ -103,8 +107,11 @@ class SoftVecEnv(VecEnv):
                 info = infos[i]
                 info["terminal_observation"] = venv.obs[i].copy()
                 info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
-                info["episode"] = {"r": float(stats["r"][i]), "l": int(stats["l"][i]),
-                                   "t": float(stats["t"][i])}
+                info["episode"] = {
+                    "r": float(stats["r"][i]),
+                    "l": int(stats["l"][i]),
+                    "t": float(stats["t"][i]),
+                }
                 info["metrics"] = venv.episode_metrics(i)
                 info["failure"] = venv.envs[i].failure
                 venv.reset_robot(i)
@@ -120,9 +127,13 @@ class SoftVecEnv(VecEnv):
         for i in self._indices(indices):
             setattr(self.venv.envs[i], attr_name, value)
 
-    def env_method(self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs) -> list[Any]:
-        return [getattr(self.venv.envs[i], method_name)(*method_args, **method_kwargs)
-                for i in self._indices(indices)]
+    def env_method(
+        self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs
+    ) -> list[Any]:
+        return [
+            getattr(self.venv.envs[i], method_name)(*method_args, **method_kwargs)
+            for i in self._indices(indices)
+        ]
 
     def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
         """True for SB3's ``Monitor``: the adapter records its episode statistics itself (so
@@ -148,6 +159,11 @@ def _row(infos: dict[str, Any], i: int) -> dict[str, Any]:
             row[key] = _row(value, i)
         else:
             item = value[i]
-            row[key] = item.copy() if isinstance(item, np.ndarray) else item.item() if hasattr(item, "item") else item
+            row[key] = (
+                item.copy()
+                if isinstance(item, np.ndarray)
+                else item.item()
+                if hasattr(item, "item")
+                else item
+            )
     return row
-

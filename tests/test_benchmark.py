@@ -10,8 +10,26 @@ from soft_snake_gym.physics.cache import drop_stale_cache
 
 def test_benchmark_cli_writes_json_and_png(tmp_path, capsys):
     out = tmp_path / "bench.json"
-    code = main(["benchmark", "--seconds", "0.05", "--repeats", "1", "--robots", "2", "--no-ppo",
-                 "--nodes", "10", "12", "--node-robots", "2", "--json", str(out), "--quiet"])
+    code = main(
+        [
+            "benchmark",
+            "--seconds",
+            "0.05",
+            "--repeats",
+            "1",
+            "--robots",
+            "2",
+            "--no-ppo",
+            "--nodes",
+            "10",
+            "12",
+            "--node-robots",
+            "2",
+            "--json",
+            str(out),
+            "--quiet",
+        ]
+    )
     assert code == 0
     res = json.loads(out.read_text())
     assert (tmp_path / "bench.png").stat().st_size > 10_000

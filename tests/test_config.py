@@ -45,12 +45,49 @@ def _old_number_grammar(text: str):
 
 
 # inputs the old --env-kwarg / policy-option grammar accepted, and what the fields took from them
-OLD_EXAMPLES = ["0.5", "10", "-3", "+2", "1e4", "1.875e6", "2e-3", "pi", "pi/6", "2*pi/3", "-pi/4",
-                "PI/2", "inf", "-inf", " 0.25 ", "007", "pacemaker", "circulant", "pulse", "sine",
-                "kelasidi", "symplectic_euler", "water", "none", "rgb_array"]
+OLD_EXAMPLES = [
+    "0.5",
+    "10",
+    "-3",
+    "+2",
+    "1e4",
+    "1.875e6",
+    "2e-3",
+    "pi",
+    "pi/6",
+    "2*pi/3",
+    "-pi/4",
+    "PI/2",
+    "inf",
+    "-inf",
+    " 0.25 ",
+    "007",
+    "pacemaker",
+    "circulant",
+    "pulse",
+    "sine",
+    "kelasidi",
+    "symplectic_euler",
+    "water",
+    "none",
+    "rgb_array",
+]
 # inputs of --hyperparams (YAML values) before issue 10
-YAML_EXAMPLES = ["0.999", "3e-4", "1.0e-3", "512", "-1", "true", "false", "null", "[128, 128]",
-                 "[64,64]", "{pi: [64, 64], vf: [64, 64]}", "tanh", "auto"]
+YAML_EXAMPLES = [
+    "0.999",
+    "3e-4",
+    "1.0e-3",
+    "512",
+    "-1",
+    "true",
+    "false",
+    "null",
+    "[128, 128]",
+    "[64,64]",
+    "{pi: [64, 64], vf: [64, 64]}",
+    "tanh",
+    "auto",
+]
 
 
 @pytest.mark.parametrize("text", OLD_EXAMPLES)
@@ -97,9 +134,12 @@ def test_shipped_configs_are_found_by_name_and_paths_pass_through(tmp_path):
         assert str(config_path(path, "env")) == path  # a path: load_yaml reports a missing file
     mine = tmp_path / "softeel.yaml"
     assert config_path(mine, "env") == mine
-    with pytest.raises(ConfigError, match=r"env config 'softel' is neither a file nor a config shipped "
-                                          r"with the package \(did you mean 'softeel'\?\); shipped env "
-                                          r"configs: eel, softeel, softworm, worm"):
+    with pytest.raises(
+        ConfigError,
+        match=r"env config 'softel' is neither a file nor a config shipped "
+        r"with the package \(did you mean 'softeel'\?\); shipped env "
+        r"configs: eel, softeel, softworm, worm",
+    ):
         config_path("softel", "env")
     with pytest.raises(ValueError, match="config kind 'envs' must be one of env, policy, algorithm"):
         shipped_configs("envs")
@@ -126,8 +166,11 @@ def test_every_shipped_policy_config_builds_a_baseline():
     for name, policy in built.items():
         data = load_yaml(shipped_configs("policy")[name])
         for key, value in data.items():  # every key of the file reached the policy
-            assert getattr(policy.params, key) == pytest.approx(value) if isinstance(value, float) \
-                else getattr(policy.params, key) == value, (name, key)
+            assert (
+                getattr(policy.params, key) == pytest.approx(value)
+                if isinstance(value, float)
+                else getattr(policy.params, key) == value
+            ), (name, key)
     assert built["pid_soft"].params.Kd == 2.0 and built["pid"].params.Kd == 1.0
     assert set(BASELINES) >= {"pid", "open-loop", "decentralized", "inching-pid"}
 
@@ -138,16 +181,56 @@ def test_every_algorithm_config_has_a_section_per_env():
 
 
 def test_the_cli_takes_shipped_names_and_lists_them_for_an_unknown_one(capsys):
-    code = main(["evaluate", "SoftEel-v0", "--policy", "pid", "--policy-config", "pid_sof",
-                 "--episodes", "1", "--max-steps", "2"])
+    code = main(
+        [
+            "evaluate",
+            "SoftEel-v0",
+            "--policy",
+            "pid",
+            "--policy-config",
+            "pid_sof",
+            "--episodes",
+            "1",
+            "--max-steps",
+            "2",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2
-    assert err.startswith("soft-snake evaluate: error: policy config 'pid_sof' is neither a file nor a config "
-                          "shipped with the package (did you mean 'pid_soft'?); shipped policy configs: "
-                          "decentralized, inching, open_loop, pid, pid_soft")
-    code = main(["evaluate", "SoftEel-v0", "--policy", "pid", "--env-config", "worm", "--episodes", "1",
-                 "--max-steps", "2"])
+    assert err.startswith(
+        "soft-snake evaluate: error: policy config 'pid_sof' is neither a file nor a config "
+        "shipped with the package (did you mean 'pid_soft'?); shipped policy configs: "
+        "decentralized, inching, open_loop, pid, pid_soft"
+    )
+    code = main(
+        [
+            "evaluate",
+            "SoftEel-v0",
+            "--policy",
+            "pid",
+            "--env-config",
+            "worm",
+            "--episodes",
+            "1",
+            "--max-steps",
+            "2",
+        ]
+    )
     assert code == 2 and "error: worm sets medium = 'ground'" in capsys.readouterr().err
-    code = main(["evaluate", "SoftEel-v0", "--policy", "pid", "--policy-config", "pid_soft",
-                 "--env-config", "softeel", "--episodes", "1", "--max-steps", "4"])
+    code = main(
+        [
+            "evaluate",
+            "SoftEel-v0",
+            "--policy",
+            "pid",
+            "--policy-config",
+            "pid_soft",
+            "--env-config",
+            "softeel",
+            "--episodes",
+            "1",
+            "--max-steps",
+            "4",
+        ]
+    )
     assert code == 0 and "policy=pid" in capsys.readouterr().out

@@ -25,9 +25,13 @@ def _tracked_text_files() -> list[Path]:
 def test_nothing_refers_to_files_outside_the_repository():
     files = _tracked_text_files()
     assert len(files) > 50
-    bad = [f"{f.relative_to(ROOT)}: {line.strip()}" for f in files if f.name != "test_docs.py"
-           for line in f.read_text(errors="replace").splitlines()
-           if "../shared" in line or re.search(r"(?<![\w/.])MODEL\.md", line)]
+    bad = [
+        f"{f.relative_to(ROOT)}: {line.strip()}"
+        for f in files
+        if f.name != "test_docs.py"
+        for line in f.read_text(errors="replace").splitlines()
+        if "../shared" in line or re.search(r"(?<![\w/.])MODEL\.md", line)
+    ]
     assert not bad, "\n".join(bad)
 
 
@@ -35,12 +39,17 @@ def test_every_cited_section_of_the_model_exists():
     model = (ROOT / "docs" / "model.md").read_text()
     sections = set(re.findall(r"^## (\d+[a-z]?)\. ", model, flags=re.M))
     assert {str(n) for n in range(1, 11)} <= sections
-    cited = {m for f in _tracked_text_files()
-             for m in re.findall(r"docs/model\.md §(\d+[a-z]?)", f.read_text(errors="replace"))}
+    cited = {
+        m
+        for f in _tracked_text_files()
+        for m in re.findall(r"docs/model\.md §(\d+[a-z]?)", f.read_text(errors="replace"))
+    }
     assert cited, "nothing cites the model"
     assert cited <= sections, f"cited but missing in docs/model.md: {sorted(cited - sections)}"
 
 
-@pytest.mark.parametrize("name", ["damping_bend", "damping_stretch", "added_mass", "mu_forward", "duty", "refine"])
+@pytest.mark.parametrize(
+    "name", ["damping_bend", "damping_stretch", "added_mass", "mu_forward", "duty", "refine"]
+)
 def test_the_model_documents_the_new_parameters(name):
     assert name in (ROOT / "docs" / "model.md").read_text()

@@ -115,15 +115,21 @@ def test_spaces_are_float32_boxes_with_named_finite_layout(env_id):
     N = env.N
     if env_id == "SoftEel-v0":
         assert list(env.observation_structure.items()) == [
-            ("kappa", N - 2), ("kappa_dot", N - 2), ("kbar", N - 2),
-            ("com_velocity_body", 2), ("goal_direction_body", 2),
+            ("kappa", N - 2),
+            ("kappa_dot", N - 2),
+            ("kbar", N - 2),
+            ("com_velocity_body", 2),
+            ("goal_direction_body", 2),
         ]
         assert env.action_space.shape == (N - 2,)
         assert env.max_curvature_rate == 2 * math.pi
     else:
         assert list(env.observation_structure.items()) == [
-            ("edge_lengths", N - 1), ("edge_length_rates", N - 1), ("lbar", N - 1),
-            ("stuck", N), ("com_velocity_body", 2),
+            ("edge_lengths", N - 1),
+            ("edge_length_rates", N - 1),
+            ("lbar", N - 1),
+            ("stuck", N),
+            ("com_velocity_body", 2),
         ]
         assert env.action_space.shape == (N - 1,)
         # covers the inching wave of docs/model.md §6 at eps = 0.3, omega = 2 pi
@@ -143,8 +149,10 @@ def test_observation_blocks_hold_the_simulator_quantities():
     h = sim.heading
     v = sim.com_velocity
     np.testing.assert_allclose(
-        parts["com_velocity_body"], [v @ [math.cos(h), math.sin(h)], v @ [-math.sin(h), math.cos(h)]],
-        rtol=1e-5, atol=1e-7,
+        parts["com_velocity_body"],
+        [v @ [math.cos(h), math.sin(h)], v @ [-math.sin(h), math.cos(h)]],
+        rtol=1e-5,
+        atol=1e-7,
     )
     np.testing.assert_allclose(parts["goal_direction_body"], [math.cos(-h), math.sin(-h)], rtol=1e-6)
 
@@ -343,12 +351,15 @@ def test_out_of_range_actions_are_clipped_not_scaled():
     assert_same(a.step(big), b.step(np.clip(big, -1, 1)))
 
 
-@pytest.mark.parametrize("bad, match", [
-    (np.full(8, np.nan, dtype=np.float32), "non-finite"),
-    (np.zeros(7, dtype=np.float32), r"shape \(7,\).*expected \(8,\)"),
-    (np.zeros((1, 8), dtype=np.float32), "shape"),
-    ("fast", "not an array of numbers"),
-])
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        (np.full(8, np.nan, dtype=np.float32), "non-finite"),
+        (np.zeros(7, dtype=np.float32), r"shape \(7,\).*expected \(8,\)"),
+        (np.zeros((1, 8), dtype=np.float32), "shape"),
+        ("fast", "not an array of numbers"),
+    ],
+)
 def test_bad_actions_raise_clear_errors(bad, match):
     env = gym.make("SoftEel-v0").unwrapped
     env.reset(seed=0)
@@ -375,8 +386,12 @@ def test_self_intersection_terminates_with_the_reason():
 
 def test_non_finite_state_terminates_with_a_finite_observation():
     # An explicit step far above the stability limit blows up; only the non-finite check stops it.
-    integ = {"method": "symplectic_euler", "substeps": 1, "max_strain": 1e300,
-             "check_self_intersection": False}
+    integ = {
+        "method": "symplectic_euler",
+        "substeps": 1,
+        "max_strain": 1e300,
+        "check_self_intersection": False,
+    }
     env = gym.make("SoftEel-v0", integrator=integ)
     env.reset(seed=0)
     for _ in range(1000):
@@ -437,8 +452,15 @@ def test_seeded_noisy_starts_differ_but_stay_small():
 
 
 def test_randomization_draws_physics_per_episode_and_reports_it():
-    ranges = {"E": [1.0e6, 3.0e6], "damping_bend": [0.0, 0.1], "damping_stretch": [0.0, 5.0], "rho": [900.0, 1100.0],
-              "C_D": [1.0, 2.0], "C_A": [1.0, 2.0], "C_f": [0.2, 0.4]}
+    ranges = {
+        "E": [1.0e6, 3.0e6],
+        "damping_bend": [0.0, 0.1],
+        "damping_stretch": [0.0, 5.0],
+        "rho": [900.0, 1100.0],
+        "C_D": [1.0, 2.0],
+        "C_A": [1.0, 2.0],
+        "C_f": [0.2, 0.4],
+    }
     env = gym.make("SoftEel-v0", randomize=ranges)
     _, info = env.reset(seed=0)
     drawn = info["randomized"]
@@ -447,7 +469,11 @@ def test_randomization_draws_physics_per_episode_and_reports_it():
         assert lo <= drawn[k] <= hi
     cfg = env.unwrapped.sim.config
     assert (cfg.rod.E, cfg.fluid.rho, cfg.fluid.C_D, cfg.fluid.C_f) == (
-        drawn["E"], drawn["rho"], drawn["C_D"], drawn["C_f"])
+        drawn["E"],
+        drawn["rho"],
+        drawn["C_D"],
+        drawn["C_f"],
+    )
     sim_before = env.unwrapped.sim
     _, info2 = env.reset()
     assert info2["randomized"] != drawn
@@ -459,7 +485,9 @@ def test_randomization_draws_physics_per_episode_and_reports_it():
 def test_yaml_configs_hold_the_defaults_and_keywords_override_them():
     eel = gym.make("SoftEel-v0", config="softeel").unwrapped  # a config shipped in the package, by name
     assert eel.settings == SwimSettings()
-    worm = gym.make("SoftWorm-v0", config=CONFIGS / "softworm.yaml", max_length_rate=0.4).unwrapped  # or a path
+    worm = gym.make(
+        "SoftWorm-v0", config=CONFIGS / "softworm.yaml", max_length_rate=0.4
+    ).unwrapped  # or a path
     assert worm.settings == dataclasses.replace(InchSettings(), max_length_rate=0.4)
     assert worm.max_length_rate == 0.4
     # a simulator config file (with its medium key) is an env config too
@@ -500,8 +528,16 @@ def test_docstring_argument_table_lists_every_keyword(cls, settings):
     documented = set(re.findall(r"^\s*\| `(\w+)`", table, flags=re.M))
     keywords = {f.name for f in dataclasses.fields(settings)} | {"config", "render_mode", "preset"}
     assert documented == keywords
-    for section in ("Description", "Action Space", "Observation Space", "Rewards", "Starting State",
-                    "Episode End", "Arguments", "Version History"):
+    for section in (
+        "Description",
+        "Action Space",
+        "Observation Space",
+        "Rewards",
+        "Starting State",
+        "Episode End",
+        "Arguments",
+        "Version History",
+    ):
         assert f"## {section}" in cls.__doc__
 
 
@@ -514,7 +550,9 @@ def test_preset_sets_the_physics_and_explicit_keywords_override_it(env_id, tmp_p
     assert cfg.fluid.added_mass == "kelasidi"
     assert env.sim.arrays.prm[L.P_DBEND] == 0.0 and env.sim.arrays.prm[L.P_DSTRETCH] == 0.0
     assert env.sim.arrays.prm[L.P_ADDED_MASS] == L.ADDED_MASS_KELASIDI
-    env = gym.make(env_id, preset="thesis", rod={"damping_bend": 0.7}, fluid={"added_mass": "consistent"}).unwrapped
+    env = gym.make(
+        env_id, preset="thesis", rod={"damping_bend": 0.7}, fluid={"added_mass": "consistent"}
+    ).unwrapped
     assert env.sim.config.rod.damping_bend == 0.7 and env.sim.arrays.prm[L.P_DBEND] == 0.7
     assert env.sim.config.rod.damping_stretch == 0.0
     assert env.sim.arrays.prm[L.P_ADDED_MASS] == L.ADDED_MASS_CONSISTENT
@@ -524,7 +562,9 @@ def test_preset_sets_the_physics_and_explicit_keywords_override_it(env_id, tmp_p
     env = gym.make(env_id, config=path, rod={"damping_stretch": 4.0, "damping_bend": 0.5}).unwrapped
     assert env.sim.config.rod.damping_stretch == 4.0 and env.sim.config.rod.damping_bend == 0.5
     assert env.sim.config.fluid.added_mass == "kelasidi"
-    with pytest.raises(ConfigError, match=f"{env_id}: preset = 'thesiss' is unknown.*available presets: .*thesis"):
+    with pytest.raises(
+        ConfigError, match=f"{env_id}: preset = 'thesiss' is unknown.*available presets: .*thesis"
+    ):
         gym.make(env_id, preset="thesiss")
 
 
@@ -563,21 +603,34 @@ def test_start_on_gait_is_at_rest_with_the_desired_curvatures_and_no_noise():
     # missing fields take the thesis gait (alpha = pi/6, delta = 2 pi/(N-2), psi0 = 0)
     env = gym.make("SoftEel-v0", start_on_gait={})
     env.reset(seed=0)
-    np.testing.assert_allclose(env.unwrapped.sim.kappa,
-                               serpenoid(serpenoid_phase(0.0, 8, 0.0, math.pi / 4), 0.0, math.pi / 6)[0],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        env.unwrapped.sim.kappa,
+        serpenoid(serpenoid_phase(0.0, 8, 0.0, math.pi / 4), 0.0, math.pi / 6)[0],
+        atol=1e-12,
+    )
 
 
 @pytest.mark.parametrize(
     ("env_id", "kwargs", "message"),
     [
         ("SoftEel-v0", {"start_on_gait": {"alpha": -0.1}}, r"alpha = -0.1 rad must be in \[0, pi\)"),
-        ("SoftEel-v0", {"start_on_gait": {"psi0": float("nan")}}, "start_on_gait.psi0 = nan must be a finite number"),
+        (
+            "SoftEel-v0",
+            {"start_on_gait": {"psi0": float("nan")}},
+            "start_on_gait.psi0 = nan must be a finite number",
+        ),
         ("SoftEel-v0", {"start_on_gait": {"omga": 2.0}}, "did you mean 'omega'"),
         ("SoftEel-v0", {"start_on_gait": True}, "start_on_gait must be a mapping"),
-        ("SoftEel-v0", {"start_on_gait": {"alpha": 1.6}}, r"self-intersecting body at t = 0.*keep alpha below 1.59"),
-        ("SoftEel-v0", {"start_on_gait": {"alpha": 1.2}, "max_rest_curvature": 1.0},
-         "beyond max_rest_curvature = 1.0"),
+        (
+            "SoftEel-v0",
+            {"start_on_gait": {"alpha": 1.6}},
+            r"self-intersecting body at t = 0.*keep alpha below 1.59",
+        ),
+        (
+            "SoftEel-v0",
+            {"start_on_gait": {"alpha": 1.2}, "max_rest_curvature": 1.0},
+            "beyond max_rest_curvature = 1.0",
+        ),
         ("SoftEel-v0", {"start_on_gait": {}, "initial_shape": "serpenoid"}, "both set the start; use one"),
         ("SoftWorm-v0", {"start_on_gait": {}}, "unknown key 'start_on_gait'"),
     ],

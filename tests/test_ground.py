@@ -53,9 +53,15 @@ def test_push_above_static_friction_breaks_away_then_decelerates_at_mu_d_g(metho
     assert sim.friction_work > 0
 
 
-def inch(direction: int, cycles: int = 4, eps: float = 0.2, omega: float = np.pi,
-         delta_l: float = 2 * np.pi / 9, duty: float | None = None,
-         ground: Ground = G) -> tuple[float, Simulator]:
+def inch(
+    direction: int,
+    cycles: int = 4,
+    eps: float = 0.2,
+    omega: float = np.pi,
+    delta_l: float = 2 * np.pi / 9,
+    duty: float | None = None,
+    ground: Ground = G,
+) -> tuple[float, Simulator]:
     """Metres per cycle of a length wave run open loop (``duty``: the peristaltic pulse)."""
     sim = Simulator(SimConfig(medium="ground", ground=ground))
     N, l0, h = sim.N, 0.18, sim.h
@@ -141,8 +147,9 @@ def test_friction_obeys_coulomb_at_the_end_of_every_step():
 
 
 @pytest.mark.parametrize("method", ["backward_euler", "symplectic_euler"])
-@pytest.mark.parametrize("direction,coef", [((1.0, 0.0), "mu_forward"), ((-1.0, 0.0), "mu_backward"),
-                                            ((0.0, 1.0), "mu_lateral")])
+@pytest.mark.parametrize(
+    "direction,coef", [((1.0, 0.0), "mu_forward"), ((-1.0, 0.0), "mu_backward"), ((0.0, 1.0), "mu_lateral")]
+)
 def test_anisotropic_kinetic_friction_depends_on_the_sliding_direction(method, direction, coef):
     ground = Ground(mu_forward=0.3, mu_backward=1.0, mu_lateral=0.6)
     sim = Simulator(SimConfig(medium="ground", ground=ground, integrator=Integrator(method=method)))

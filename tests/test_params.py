@@ -61,7 +61,9 @@ def test_default_yaml_files_are_exactly_the_dataclass_defaults():
 def test_unknown_key_is_rejected_with_a_suggestion(tmp_path):
     path = tmp_path / "bad.yaml"
     path.write_text("rod:\n  edge_mas: 0.8\n")
-    with pytest.raises(ConfigError, match=r"unknown key 'edge_mas' in bad.yaml.rod; did you mean 'edge_mass'"):
+    with pytest.raises(
+        ConfigError, match=r"unknown key 'edge_mas' in bad.yaml.rod; did you mean 'edge_mass'"
+    ):
         load_sim_config(path)
 
 
@@ -98,7 +100,9 @@ def test_thesis_preset_is_the_sources_setting_and_overrides_win_field_by_field(t
     thesis = load_preset("thesis")  # set explicitly, whatever the package defaults become
     assert thesis["rod"]["damping_bend"] == 0.0 and thesis["rod"]["damping_stretch"] == 0.0
     assert thesis["fluid"]["added_mass"] == "kelasidi"
-    merged = with_preset({"preset": "thesis", "rod": {"damping_bend": 2.5, "E_bend": 1e5}, "medium": "ground"})
+    merged = with_preset(
+        {"preset": "thesis", "rod": {"damping_bend": 2.5, "E_bend": 1e5}, "medium": "ground"}
+    )
     assert "preset" not in merged and merged["medium"] == "ground"
     assert merged["rod"] == {"damping_bend": 2.5, "damping_stretch": 0.0, "E_bend": 1e5}
     assert merged["fluid"] == {"added_mass": "kelasidi"}
@@ -124,9 +128,14 @@ def test_shipped_presets_hold_only_valid_simulator_sections():
 
 @pytest.mark.parametrize(
     ("name", "message"),
-    [("thesiss", r"preset = 'thesiss' is unknown \(did you mean 'thesis'\?\); available presets: .*thesis"),
-     ("nope", r"preset = 'nope' is unknown; available presets: .*thesis"),
-     (3, r"preset = 3 is unknown; available presets")],
+    [
+        (
+            "thesiss",
+            r"preset = 'thesiss' is unknown \(did you mean 'thesis'\?\); available presets: .*thesis",
+        ),
+        ("nope", r"preset = 'nope' is unknown; available presets: .*thesis"),
+        (3, r"preset = 3 is unknown; available presets"),
+    ],
 )
 def test_unknown_preset_lists_the_available_ones(tmp_path, name, message):
     from soft_snake_gym.config import with_preset

@@ -17,8 +17,13 @@ RNG_SEED = 1234
 def bent_simulator(N: int, medium: str = "none", damping: float = 0.0, seed: int = RNG_SEED, **integ):
     """A simulator in a random bent, slightly stretched, moving state."""
     rng = np.random.default_rng(seed)
-    sim = Simulator(SimConfig(rod=Rod(N=N, damping_bend=damping, damping_stretch=damping), medium=medium,
-                              integrator=Integrator(**integ)))
+    sim = Simulator(
+        SimConfig(
+            rod=Rod(N=N, damping_bend=damping, damping_stretch=damping),
+            medium=medium,
+            integrator=Integrator(**integ),
+        )
+    )
     lbar = np.full(N - 1, 0.18)
     x = body_from_curvature(rng.normal(0, 0.4, N - 2), lbar * (1 + rng.normal(0, 0.02, N - 1)))
     sim.set_state(x=x, v=rng.normal(0, 0.3, (N, 2)), kbar=rng.normal(0, 0.3, N - 2), lbar=lbar)
@@ -73,8 +78,11 @@ def test_analytic_jacobians_match_finite_differences(N, medium, damping):
     assert np.abs(dFdv - fd_v).max() <= 1e-6 * max(np.abs(fd_v).max(), 1.0)
     assert np.abs(dFdx - fd_x).max() <= 1e-6 * np.abs(fd_x).max()
     if damping:  # the damping forces' position dependence on its own scale (stiffness hides it)
-        sim.set_config(dataclasses.replace(sim.config, rod=dataclasses.replace(
-            sim.config.rod, damping_bend=0.0, damping_stretch=0.0)))
+        sim.set_config(
+            dataclasses.replace(
+                sim.config, rod=dataclasses.replace(sim.config.rod, damping_bend=0.0, damping_stretch=0.0)
+            )
+        )
         _, dFdx_el, _ = sim.force_jacobians()
         fd_x_el, _ = _fd_jacobians(sim, water)
         damp_x, damp_fd_x = dFdx - dFdx_el, fd_x - fd_x_el
@@ -107,7 +115,16 @@ def test_banded_added_mass_solve_matches_dense():
     rng = np.random.default_rng(7)
     F = rng.normal(size=2 * N)
     a = np.zeros(2 * N)
-    forces.solve_mass(sim.arrays.q, sim.arrays.prm, sim.arrays.buf[layout.B_M], F, a, sim.arrays.J, sim.arrays.ibuf[layout.I_PIV], True)
+    forces.solve_mass(
+        sim.arrays.q,
+        sim.arrays.prm,
+        sim.arrays.buf[layout.B_M],
+        F,
+        a,
+        sim.arrays.J,
+        sim.arrays.ibuf[layout.I_PIV],
+        True,
+    )
     # dense M + M_A straight from docs/model.md §4
     Md = np.diag(np.repeat(sim.masses, 2))
     x = sim.x
@@ -119,15 +136,20 @@ def test_banded_added_mass_solve_matches_dense():
         mu_n = fl.rho * np.pi * fl.C_A * rod.a**2 * l
         for r in (i, i + 1):
             for c in (i, i + 1):
-                Md[2 * r:2 * r + 2, 2 * c:2 * c + 2] += mu_n / 4 * np.outer(n, n)
+                Md[2 * r : 2 * r + 2, 2 * c : 2 * c + 2] += mu_n / 4 * np.outer(n, n)
     expected = np.linalg.solve(Md, F)
     assert np.abs(a - expected).max() < 1e-12 * np.abs(expected).max()
     assert np.abs(a - F / np.repeat(sim.masses, 2)).max() > 1e-3  # added mass matters
 
 
 def _free_vibration(method: str, h: float, substeps: int | None, T: float, N: int = 8):
-    sim = Simulator(SimConfig(rod=Rod(N=N, damping_bend=0.0), medium="none",
-                              integrator=Integrator(method=method, h=h, substeps=substeps)))
+    sim = Simulator(
+        SimConfig(
+            rod=Rod(N=N, damping_bend=0.0),
+            medium="none",
+            integrator=Integrator(method=method, h=h, substeps=substeps),
+        )
+    )
     x0 = body_from_curvature(0.15 * np.sin(np.pi * np.arange(1, N - 1) / (N - 1)), sim.lbar)
     sim.reset(x=x0)
     energies, P, L = [total_energy(sim)], [], []
@@ -185,7 +207,9 @@ def test_backward_euler_converges_at_first_order():
 
 def test_uniform_rest_curvature_relaxes_to_a_circular_arc():
     kbar0 = 0.3
-    sim = Simulator(SimConfig(rod=Rod(N=12, damping_bend=2.0, damping_stretch=2.0)))  # water + damping to settle
+    sim = Simulator(
+        SimConfig(rod=Rod(N=12, damping_bend=2.0, damping_stretch=2.0))
+    )  # water + damping to settle
     sim.reset(kbar=np.full(10, kbar0))  # a straight body with curved rest shape
     sim.reset(x=body_from_curvature(np.zeros(10), sim.lbar), kbar=np.full(10, kbar0))
     for _ in range(1000):
@@ -225,8 +249,9 @@ def test_simulated_vibration_has_the_first_mode_frequency():
     N, L, M = 20, 1.62, 7.2
     w1 = _bending_frequencies(N, L, M)[0]
     rod = Rod(N=N, edge_length=L / (N - 1), edge_mass=M / (N - 1))
-    sim = Simulator(SimConfig(rod=rod, medium="none",
-                              integrator=Integrator(method="symplectic_euler", h=1e-3)))
+    sim = Simulator(
+        SimConfig(rod=rod, medium="none", integrator=Integrator(method="symplectic_euler", h=1e-3))
+    )
     # first mode shape from the eigenvector, small amplitude
     _, dFdx, _ = sim.force_jacobians()
     s = 1 / np.sqrt(np.repeat(sim.masses, 2))
@@ -293,8 +318,12 @@ def test_explicit_substeps_keep_material_damping_stable():
     fastest damping time: on short, light edges that limit, not the elastic one, sets the
     sub-steps (docs/model.md §5a)."""
     rod = Rod(N=30, edge_length=1.62 / 29, edge_mass=7.2 / 29, damping_bend=1.0, damping_stretch=5.0)
-    elastic_only = Simulator(SimConfig(rod=dataclasses.replace(rod, damping_bend=0.0, damping_stretch=0.0),
-                                       integrator=Integrator(method="symplectic_euler")))
+    elastic_only = Simulator(
+        SimConfig(
+            rod=dataclasses.replace(rod, damping_bend=0.0, damping_stretch=0.0),
+            integrator=Integrator(method="symplectic_euler"),
+        )
+    )
     sim = Simulator(SimConfig(rod=rod, integrator=Integrator(method="symplectic_euler")))
     assert sim.substeps > 2 * elastic_only.substeps
     sim.reset(x=body_from_curvature(0.3 * np.sin(np.arange(1, 29) / 3.0), sim.lbar))

@@ -59,7 +59,9 @@ def test_comparison_chart_draws_each_policys_mean_with_its_std(tmp_path, monkeyp
 
     drawn = _capture(monkeypatch)
     results = {"pid": {"average_speed": (0.1, 0.01)}, "open-loop": {"average_speed": (0.2, 0.03)}}
-    path = plots.comparison_chart(results, [("average_speed", "average speed", "m/s")], tmp_path / "c" / "x.png")
+    path = plots.comparison_chart(
+        results, [("average_speed", "average speed", "m/s")], tmp_path / "c" / "x.png"
+    )
     assert path.is_file()
     ax = drawn[0].axes[0]
     assert [p.get_height() for p in ax.patches] == [0.1, 0.2]
@@ -76,9 +78,19 @@ def test_learning_curve_is_drawn_from_the_run_folder(tmp_path, monkeypatch):
 
     cfg = load_train_config("SoftEel-v0", overrides={"eval_episodes": 2, "eval_freq": 100})
     (tmp_path / "config.yaml").write_text(yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False))
-    rows = [{"timesteps": s, "return_mean": 1.0, "average_speed_mean": v, "average_speed_std": 0.01,
-             "cost_of_transport_mean": 2.0, "cost_of_transport_std": 0.1, "baseline_average_speed": 0.05,
-             "baseline_cost_of_transport": 3.0} for s, v in ((100, 0.02), (200, 0.04))]
+    rows = [
+        {
+            "timesteps": s,
+            "return_mean": 1.0,
+            "average_speed_mean": v,
+            "average_speed_std": 0.01,
+            "cost_of_transport_mean": 2.0,
+            "cost_of_transport_std": 0.1,
+            "baseline_average_speed": 0.05,
+            "baseline_cost_of_transport": 3.0,
+        }
+        for s, v in ((100, 0.02), (200, 0.04))
+    ]
     with open(tmp_path / "learning_curve.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()

@@ -103,8 +103,12 @@ def test_record_video_writes_an_episode(tmp_path):
     pytest.importorskip("moviepy")
     from gymnasium.wrappers import RecordVideo
 
-    env = RecordVideo(gym.make("SoftEel-v0", render_mode="rgb_array", max_episode_steps=20),
-                      video_folder=str(tmp_path / "videos"), episode_trigger=lambda ep: True, disable_logger=True)
+    env = RecordVideo(
+        gym.make("SoftEel-v0", render_mode="rgb_array", max_episode_steps=20),
+        video_folder=str(tmp_path / "videos"),
+        episode_trigger=lambda ep: True,
+        disable_logger=True,
+    )
     env.reset(seed=0)
     done = False
     while not done:

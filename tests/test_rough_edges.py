@@ -50,7 +50,9 @@ def test_messages_name_the_range_the_path_and_end_sentences(tmp_path):
     with pytest.raises(ConfigError) as err:
         gym.make("SoftEel-v0", rod={"E": "abc"})
     assert str(err.value) == "SoftEel-v0.rod.E = 'abc' must be a number in (0.0, inf)"
-    with pytest.raises(ConfigError, match=r"SoftEel-v0.max_curvature_rate = 'x' must be a number in \(0.0, inf\)"):
+    with pytest.raises(
+        ConfigError, match=r"SoftEel-v0.max_curvature_rate = 'x' must be a number in \(0.0, inf\)"
+    ):
         gym.make("SoftEel-v0", max_curvature_rate="x")
     with pytest.raises(ConfigError) as err:
         from_dict(Rod, {"zzzz": 1})

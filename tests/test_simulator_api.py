@@ -52,7 +52,10 @@ def test_observables_and_energy_accounting():
     "kwargs,match",
     [
         ({"u_k": np.zeros(7)}, r"u_k has shape \(7,\); expected \(8,\)"),
-        ({"u_k": np.array([0, 0, np.nan, 0, 0, 0, 0, 0])}, r"u_k has non-finite entries at flat indices \[2\]"),
+        (
+            {"u_k": np.array([0, 0, np.nan, 0, 0, 0, 0, 0])},
+            r"u_k has non-finite entries at flat indices \[2\]",
+        ),
         ({"u_l": np.zeros((9, 1))}, r"u_l has shape \(9, 1\); expected \(9,\)"),
         ({"u_l": [np.inf] + [0] * 8}, r"u_l has non-finite entries"),
     ],
@@ -71,7 +74,9 @@ def test_simulator_over_given_arrays_uses_them_and_rejects_wrong_ones():
     sim.step(u_k=np.full(8, 0.5))
     assert np.array_equal(stacked.q[1], sim.x.ravel()) and not stacked.q[0].any()
     assert sim.arrays.kbar.base is stacked.kbar and stacked.kbar[1, 0] == pytest.approx(0.005)
-    with pytest.raises(ValueError, match=r"arrays is SimArrays with q of shape \(2, 20\): need .* q of shape \(20,\)"):
+    with pytest.raises(
+        ValueError, match=r"arrays is SimArrays with q of shape \(2, 20\): need .* q of shape \(20,\)"
+    ):
         Simulator(arrays=stacked)
     with pytest.raises(ValueError, match=r"arrays is tuple: need the SimArrays of one robot of N = 10"):
         Simulator(arrays=tuple(stacked.row(0)))
@@ -118,8 +123,9 @@ def test_runaway_stretch_and_bad_rest_length_are_reported():
 def test_non_finite_state_and_non_convergence_are_reported():
     # an explicit step far above the stability limit blows up; with the strain guard off,
     # the state goes non-finite, and that is reported rather than stepped on
-    unstable = Integrator(method="symplectic_euler", substeps=1, max_strain=1e300,
-                          check_self_intersection=False)
+    unstable = Integrator(
+        method="symplectic_euler", substeps=1, max_strain=1e300, check_self_intersection=False
+    )
     sim = Simulator(SimConfig(medium="none", integrator=unstable))
     sim.reset(x=body_from_curvature(np.full(8, 0.2), sim.lbar))
     steps = 0

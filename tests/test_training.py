@@ -16,20 +16,38 @@ import yaml
 from soft_snake_gym.cli import main
 from soft_snake_gym.training import TrainConfig, load_train_config
 
-TINY = ["n_envs=2", "n_steps=64", "batch_size=64", "n_epochs=2", "eval_freq=128", "checkpoint_freq=128",
-        "eval_episodes=1", "env_kwargs.max_episode_steps=100"]
+TINY = [
+    "n_envs=2",
+    "n_steps=64",
+    "batch_size=64",
+    "n_epochs=2",
+    "eval_freq=128",
+    "checkpoint_freq=128",
+    "eval_episodes=1",
+    "env_kwargs.max_episode_steps=100",
+]
 
 
 def cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "soft_snake_gym.cli", *args], capture_output=True,
-                          text=True, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "soft_snake_gym.cli", *args], capture_output=True, text=True, timeout=timeout
+    )
 
 
 @pytest.fixture(scope="module")
 def trained_run(tmp_path_factory) -> Path:
     run = tmp_path_factory.mktemp("runs") / "eel"
-    out = cli("train", "SoftEel-v0", "--n-timesteps", "256", "--run-dir", str(run), "--no-progress",
-              "--hyperparams", *TINY)
+    out = cli(
+        "train",
+        "SoftEel-v0",
+        "--n-timesteps",
+        "256",
+        "--run-dir",
+        str(run),
+        "--no-progress",
+        "--hyperparams",
+        *TINY,
+    )
     assert out.returncode == 0, out.stderr
     assert "last evaluation at 256 steps" in out.stdout and "baseline pid" in out.stdout
     return run
@@ -37,8 +55,17 @@ def trained_run(tmp_path_factory) -> Path:
 
 def test_run_folder_holds_everything_needed_to_reproduce(trained_run):
     run = trained_run
-    for name in ("config.yaml", "command.txt", "meta.json", "progress.csv", "learning_curve.csv",
-                 "best_model.zip", "best_vecnormalize.pkl", "final_model.zip", "vecnormalize.pkl"):
+    for name in (
+        "config.yaml",
+        "command.txt",
+        "meta.json",
+        "progress.csv",
+        "learning_curve.csv",
+        "best_model.zip",
+        "best_vecnormalize.pkl",
+        "final_model.zip",
+        "vecnormalize.pkl",
+    ):
         assert (run / name).is_file(), name
     assert list((run / "tb").glob("events.out.tfevents.*"))
     ckpts = sorted(p.name for p in (run / "checkpoints").iterdir())
@@ -63,13 +90,23 @@ def test_evaluate_loads_the_run_and_resume_continues_it(trained_run):
     out = cli("evaluate", "SoftEel-v0", "--policy", str(trained_run), "--episodes", "1", "--max-steps", "100")
     assert out.returncode == 0, out.stderr
     assert "average speed" in out.stdout and "cost of transport" in out.stdout
-    out = cli("train", "--resume", str(trained_run), "--n-timesteps", "384", "--no-progress",
-              "--hyperparams", "env_kwargs.energy_cost_weight=0.01")
+    out = cli(
+        "train",
+        "--resume",
+        str(trained_run),
+        "--n-timesteps",
+        "384",
+        "--no-progress",
+        "--hyperparams",
+        "env_kwargs.energy_cost_weight=0.01",
+    )
     assert out.returncode == 0, out.stderr
     assert "(resumed)" in out.stdout
     # a curriculum step is recorded: the new settings, the earlier ones, both commands
     assert load_train_config("SoftEel-v0", path=trained_run / "config.yaml").env_kwargs == {
-        "max_episode_steps": 100, "energy_cost_weight": 0.01}
+        "max_episode_steps": 100,
+        "energy_cost_weight": 0.01,
+    }
     assert (trained_run / "config.1.yaml").is_file()
     assert len((trained_run / "command.txt").read_text().splitlines()) == 2
     # running longer with the same settings is the same stage: no new config.<k>.yaml
@@ -87,9 +124,24 @@ def test_evaluate_loads_the_run_and_resume_continues_it(trained_run):
 def test_ctrl_c_keeps_a_checkpoint_that_resumes(tmp_path):
     run = tmp_path / "interrupted"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "soft_snake_gym.cli", "train", "SoftEel-v0", "--n-timesteps", "100000",
-         "--run-dir", str(run), "--no-progress", "--hyperparams", *TINY, "eval_freq=0"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-m",
+            "soft_snake_gym.cli",
+            "train",
+            "SoftEel-v0",
+            "--n-timesteps",
+            "100000",
+            "--run-dir",
+            str(run),
+            "--no-progress",
+            "--hyperparams",
+            *TINY,
+            "eval_freq=0",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     deadline = time.time() + 240
     while not list((run / "checkpoints").glob("model_*_steps.zip")) and time.time() < deadline:
@@ -110,7 +162,10 @@ def test_ctrl_c_keeps_a_checkpoint_that_resumes(tmp_path):
     "args,message",
     [
         (["train", "SoftEal-v0"], "environment id 'SoftEal-v0' does not exist; did you mean 'SoftEel-v0'"),
-        (["train", "SoftEel-v0", "--hyperparams", "gama=0.99"], "unknown hyperparameter 'gama' for PPO; did you mean 'gamma'"),
+        (
+            ["train", "SoftEel-v0", "--hyperparams", "gama=0.99"],
+            "unknown hyperparameter 'gama' for PPO; did you mean 'gamma'",
+        ),
         (["train", "SoftEel-v0", "--hyperparams", "learning_rate=lin_3e-4"], "is a string"),
         (["train", "SoftEel-v0", "--config", "{bad}"], "not valid YAML"),
         (["train", "--resume", "{empty}"], "has no checkpoint"),
@@ -163,9 +218,18 @@ def test_shipped_agents_beat_their_baselines(env_id, baseline):
     "extra,message",
     [
         (["--hyperparams", "env_kwargs.foo=1"], "unknown key 'foo' in SoftEel-v0"),
-        (["--hyperparams", "gamma=1.5"], "hyperparameter gamma = 1.5 is outside the allowed range [0.0, 1.0] (the discount factor)"),
-        (["--hyperparams", "n_steps=0"], "hyperparameter n_steps = 0 must be an integer in [1, inf] (steps per env per rollout)"),
-        (["--hyperparams", "learning_rate=-1e-3"], "learning_rate = -0.001 is outside the allowed range (0.0, inf)"),
+        (
+            ["--hyperparams", "gamma=1.5"],
+            "hyperparameter gamma = 1.5 is outside the allowed range [0.0, 1.0] (the discount factor)",
+        ),
+        (
+            ["--hyperparams", "n_steps=0"],
+            "hyperparameter n_steps = 0 must be an integer in [1, inf] (steps per env per rollout)",
+        ),
+        (
+            ["--hyperparams", "learning_rate=-1e-3"],
+            "learning_rate = -0.001 is outside the allowed range (0.0, inf)",
+        ),
         (["--hyperparams", "baseline=pdi"], "unknown policy 'pdi'; did you mean 'pid'?"),
     ],
 )
@@ -184,8 +248,22 @@ def test_a_folder_without_checkpoint_is_reused_and_steps_are_exact(tmp_path, cap
     (run / "learning_curve.csv").write_text("timesteps,wall_s,return_mean\n999,1.0,5.0\n")
     hyper = [h for h in TINY if not h.startswith(("eval_freq", "checkpoint_freq"))]
     # n_envs 2 x n_steps 64: a rollout is 128 steps; 200 rounds up to 256
-    code = main(["train", "SoftEel-v0", "--run-dir", str(run), "--no-progress", "--n-timesteps", "200",
-                 "--hyperparams", *hyper, "checkpoint_freq=100", "eval_freq=100", "baseline=none"])
+    code = main(
+        [
+            "train",
+            "SoftEel-v0",
+            "--run-dir",
+            str(run),
+            "--no-progress",
+            "--n-timesteps",
+            "200",
+            "--hyperparams",
+            *hyper,
+            "checkpoint_freq=100",
+            "eval_freq=100",
+            "baseline=none",
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0
     assert "for 256 steps (200 rounded up to whole rollouts of n_steps x n_envs = 128 steps)" in out
@@ -237,10 +315,25 @@ def test_git_commit_says_when_there_is_no_checkout(tmp_path):
 def test_sigterm_saves_a_checkpoint_and_prints_the_resume_command(tmp_path):
     run = tmp_path / "terminated"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "soft_snake_gym.cli", "train", "SoftEel-v0", "--n-timesteps", "100000",
-         "--run-dir", str(run), "--no-progress", "--hyperparams", *TINY, "eval_freq=0",
-         "checkpoint_freq=100000"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-m",
+            "soft_snake_gym.cli",
+            "train",
+            "SoftEel-v0",
+            "--n-timesteps",
+            "100000",
+            "--run-dir",
+            str(run),
+            "--no-progress",
+            "--hyperparams",
+            *TINY,
+            "eval_freq=0",
+            "checkpoint_freq=100000",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
         deadline = time.time() + 240  # training has started once progress.csv has a row

@@ -56,8 +56,10 @@ def test_make_vec_returns_the_batched_env_with_batched_spaces(env_id):
     assert isinstance(gym.make_vec(env_id, num_envs=2, vectorization_mode="sync"), SyncVectorEnv)
 
 
-@pytest.mark.parametrize(("env_id", "mode"), [(i, AutoresetMode.NEXT_STEP) for i in IDS]
-                         + [("SoftEel-v0", AutoresetMode.SAME_STEP)])
+@pytest.mark.parametrize(
+    ("env_id", "mode"),
+    [(i, AutoresetMode.NEXT_STEP) for i in IDS] + [("SoftEel-v0", AutoresetMode.SAME_STEP)],
+)
 def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_id, mode):
     """Robot i seeded s + i, with the same actions, is the single env seeded s + i: obs,
     rewards, ends, every info entry and the episode statistics, across failures, time limits
@@ -65,8 +67,14 @@ def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_i
     n, steps, kw = 4, 500 if mode == AutoresetMode.NEXT_STEP else 250, ENDS[env_id]
     batched = gym.make_vec(env_id, num_envs=n, max_episode_steps=90, autoreset_mode=mode, **kw)
     sync = RecordEpisodeStatistics(
-        gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", max_episode_steps=90,
-                     vector_kwargs={"autoreset_mode": mode}, **kw)
+        gym.make_vec(
+            env_id,
+            num_envs=n,
+            vectorization_mode="sync",
+            max_episode_steps=90,
+            vector_kwargs={"autoreset_mode": mode},
+            **kw,
+        )
     )
     obs_b, info_b = batched.reset(seed=11)
     obs_s, info_s = sync.reset(seed=11)
@@ -77,7 +85,9 @@ def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_i
     for a in _actions(batched.action_space, steps, seed=2):
         out_b = batched.step(a)
         out_s = sync.step(a)
-        for x, y, what in zip(out_b[:4], out_s[:4], ("obs", "reward", "terminated", "truncated"), strict=True):
+        for x, y, what in zip(
+            out_b[:4], out_s[:4], ("obs", "reward", "terminated", "truncated"), strict=True
+        ):
             assert data_equivalence(x, y, exact=True), what
         assert data_equivalence(_drop_times(out_b[4]), _drop_times(out_s[4]), exact=True)
         assert np.array_equal(out_b[0].view(np.int32), out_s[0].view(np.int32))  # signed zeros too
@@ -148,8 +158,9 @@ def test_threads_do_not_change_a_bit():
     a = _actions(Box(-1, 1, (3, 8)), 150, seed=4)
     runs = []
     for threads in (1, 2):
-        venv = SoftVectorEnv("SoftEel-v0", 3, num_threads=threads, max_episode_steps=40,
-                             max_curvature_rate=30.0)
+        venv = SoftVectorEnv(
+            "SoftEel-v0", 3, num_threads=threads, max_episode_steps=40, max_curvature_rate=30.0
+        )
         assert venv.num_threads == threads
         obs, _ = venv.reset(seed=3)
         trace = [obs]
@@ -179,7 +190,9 @@ def test_reset_accepts_one_seed_per_robot_and_options():
 
 
 def test_bad_arguments_are_explained():
-    with pytest.raises(ValueError, match=r"num_envs = 0 must be an integer in \[1, inf\] \(the number of robots\)"):
+    with pytest.raises(
+        ValueError, match=r"num_envs = 0 must be an integer in \[1, inf\] \(the number of robots\)"
+    ):
         SoftVectorEnv("SoftEel-v0", 0)
     with pytest.raises(ValueError, match=r"num_threads = 0 must be an integer in \[1, "):
         SoftVectorEnv("SoftEel-v0", 2, num_threads=0)
@@ -263,8 +276,10 @@ def test_sb3_ppo_trains_and_vecnormalize_and_evaluate_policy_run(tmp_path):
     before = [p.detach().clone() for p in model.policy.parameters()]
     model.learn(512)
     assert model.num_timesteps == 512
-    assert any(not np.array_equal(b.numpy(), p.detach().numpy())
-               for b, p in zip(before, model.policy.parameters(), strict=True))
+    assert any(
+        not np.array_equal(b.numpy(), p.detach().numpy())
+        for b, p in zip(before, model.policy.parameters(), strict=True)
+    )
     assert len(model.ep_info_buffer) == 8  # episode statistics reach SB3's logger
     assert env.obs_rms.count > 512  # VecNormalize saw every observation
     env.save(tmp_path / "vecnormalize.pkl")

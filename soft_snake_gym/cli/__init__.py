@@ -31,7 +31,16 @@ __all__ = ["COMMANDS", "CLIError", "build_parser", "commands", "main"]
 
 
 #: The commands, in the order ``soft-snake --help`` lists them.
-COMMANDS: tuple[ModuleType, ...] = (evaluate, sweep, figures, reproduce, train, compare, benchmark, convergence)
+COMMANDS: tuple[ModuleType, ...] = (
+    evaluate,
+    sweep,
+    figures,
+    reproduce,
+    train,
+    compare,
+    benchmark,
+    convergence,
+)
 
 
 def commands() -> dict[str, ModuleType]:
@@ -41,7 +50,9 @@ def commands() -> dict[str, ModuleType]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every command."""
-    parser = Parser(prog="soft-snake", description="Soft segmented robots: simulate, evaluate, sweep, reproduce.")
+    parser = Parser(
+        prog="soft-snake", description="Soft segmented robots: simulate, evaluate, sweep, reproduce."
+    )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subs = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=Parser)
     for name, module in commands().items():

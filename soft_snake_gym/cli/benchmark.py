@@ -24,16 +24,32 @@ HELP = "steps per second of the envs, batched env, PPO, against MuJoCo's Swimmer
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The command's arguments."""
     p.add_argument("--seconds", type=float, default=1.0, help="seconds per case per round (default 1)")
-    p.add_argument("--repeats", type=int, default=3, help="interleaved rounds; the median is reported (default 3)")
-    p.add_argument("--robots", type=int, nargs="+", default=list(DEFAULT_ROBOTS),
-                   help="robot counts of the batched env (default 1 16 256 1024)")
+    p.add_argument(
+        "--repeats", type=int, default=3, help="interleaved rounds; the median is reported (default 3)"
+    )
+    p.add_argument(
+        "--robots",
+        type=int,
+        nargs="+",
+        default=list(DEFAULT_ROBOTS),
+        help="robot counts of the batched env (default 1 16 256 1024)",
+    )
     p.add_argument("--sync-robots", type=int, default=16, help="Swimmer-v5 SyncVectorEnv size (default 16)")
     p.add_argument("--no-ppo", action="store_true", help="skip the PPO training comparison")
-    p.add_argument("--ppo-timesteps", type=int, default=8192, help="timed PPO steps per env kind (default 8192)")
+    p.add_argument(
+        "--ppo-timesteps", type=int, default=8192, help="timed PPO steps per env kind (default 8192)"
+    )
     p.add_argument("--ppo-n-envs", type=int, default=None, help="PPO n_envs (default: the PPO config's, 8)")
-    p.add_argument("--nodes", type=int, nargs="*", default=list(DEFAULT_NODES),
-                   help="node counts for the cost-against-N rows (default 10 20 50 100)")
-    p.add_argument("--node-robots", type=int, default=64, help="robots in the cost-against-N rows (default 64)")
+    p.add_argument(
+        "--nodes",
+        type=int,
+        nargs="*",
+        default=list(DEFAULT_NODES),
+        help="node counts for the cost-against-N rows (default 10 20 50 100)",
+    )
+    p.add_argument(
+        "--node-robots", type=int, default=64, help="robots in the cost-against-N rows (default 64)"
+    )
     p.add_argument("--json", default="benchmark.json", help="results file (default benchmark.json)")
     p.add_argument("--png", default=None, help="figure (default: the JSON's name with .png)")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
@@ -42,8 +58,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Check the counts, run every case, print the report, write the JSON and the figure."""
     if args.seconds <= 0 or args.repeats < 1:
-        raise CLIError(f"--seconds {args.seconds} and --repeats {args.repeats}: need seconds > 0 and repeats >= 1")
-    bad = [n for n in args.robots + [args.sync_robots, args.node_robots] if n < 1] + [N for N in args.nodes if N < 3]
+        raise CLIError(
+            f"--seconds {args.seconds} and --repeats {args.repeats}: need seconds > 0 and repeats >= 1"
+        )
+    bad = [n for n in args.robots + [args.sync_robots, args.node_robots] if n < 1] + [
+        N for N in args.nodes if N < 3
+    ]
     if bad:
         raise CLIError(f"robot counts must be >= 1 and node counts >= 3; got {bad}")
     if args.ppo_timesteps < 1:
@@ -53,10 +73,18 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"[benchmark] {msg}", file=sys.stderr, flush=True)
 
-    res = run_benchmark(seconds=args.seconds, repeats=args.repeats, robots=tuple(args.robots),
-                        sync_robots=args.sync_robots, ppo=not args.no_ppo, ppo_timesteps=args.ppo_timesteps,
-                        ppo_n_envs=args.ppo_n_envs, nodes=tuple(args.nodes), node_robots=args.node_robots,
-                        progress=progress)
+    res = run_benchmark(
+        seconds=args.seconds,
+        repeats=args.repeats,
+        robots=tuple(args.robots),
+        sync_robots=args.sync_robots,
+        ppo=not args.no_ppo,
+        ppo_timesteps=args.ppo_timesteps,
+        ppo_n_envs=args.ppo_n_envs,
+        nodes=tuple(args.nodes),
+        node_robots=args.node_robots,
+        progress=progress,
+    )
     report = format_report(res)
     res["report"] = report
     json_path = Path(args.json)

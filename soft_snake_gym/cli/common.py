@@ -20,7 +20,12 @@ class CLIError(Exception):
 
 #: Exception types that mean "the user asked for something impossible": one line, exit code 2.
 USER_ERRORS: tuple[type[BaseException], ...] = (
-    CLIError, ConfigError, PolicyEnvMismatch, gymnasium.error.Error, FileNotFoundError, ValueError,
+    CLIError,
+    ConfigError,
+    PolicyEnvMismatch,
+    gymnasium.error.Error,
+    FileNotFoundError,
+    ValueError,
 )
 
 
@@ -34,10 +39,17 @@ class Parser(argparse.ArgumentParser):
 def add_env_arguments(p: argparse.ArgumentParser) -> None:
     """``--max-steps``, ``--env-config`` and ``--env-kwarg``: the env of an episode command."""
     p.add_argument("--max-steps", type=int, help="episode length in control steps (default: the id's)")
-    p.add_argument("--env-config", metavar="YAML",
-                   help="YAML file of env keywords, or a shipped one by name (softeel, softworm, eel, worm)")
-    p.add_argument("--env-kwarg", action="append", metavar="KEY=VALUE",
-                   help="env keyword, repeatable; dotted keys reach sections (rod.E_bend=1.87e4)")
+    p.add_argument(
+        "--env-config",
+        metavar="YAML",
+        help="YAML file of env keywords, or a shipped one by name (softeel, softworm, eel, worm)",
+    )
+    p.add_argument(
+        "--env-kwarg",
+        action="append",
+        metavar="KEY=VALUE",
+        help="env keyword, repeatable; dotted keys reach sections (rod.E_bend=1.87e4)",
+    )
 
 
 def env_kwargs_from_args(args: argparse.Namespace) -> dict[str, Any]:
@@ -45,7 +57,8 @@ def env_kwargs_from_args(args: argparse.Namespace) -> dict[str, Any]:
     ``--max-steps`` (checked) as ``make_eval_env``'s ``env_kwargs``."""
     # dotted keys build nested sections: rod.E_bend=1.87e4 -> {"rod": {"E_bend": ...}}
     env_kwargs = parse_assignments(
-        args.env_kwarg, "--env-kwarg {item} is not key=value; write e.g. --env-kwarg dt=0.02")
+        args.env_kwarg, "--env-kwarg {item} is not key=value; write e.g. --env-kwarg dt=0.02"
+    )
     if args.env_config:
         env_kwargs["config"] = args.env_config
     if args.max_steps is not None:

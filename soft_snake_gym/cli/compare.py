@@ -23,9 +23,13 @@ HELP = "evaluate several policies on the same seeds: one table, one bar chart"
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The command's arguments."""
     p.add_argument("env_id", nargs="?", default="SoftEel-v0", help="environment id (default SoftEel-v0)")
-    p.add_argument("--policies", nargs="+", metavar="SPEC",
-                   help="baselines (pid, open-loop, 'pid:alpha=0.6', inching-pid...), run folders, "
-                        "model zips or zoo:ppo (default: the env's baselines and its shipped PPO agent)")
+    p.add_argument(
+        "--policies",
+        nargs="+",
+        metavar="SPEC",
+        help="baselines (pid, open-loop, 'pid:alpha=0.6', inching-pid...), run folders, "
+        "model zips or zoo:ppo (default: the env's baselines and its shipped PPO agent)",
+    )
     p.add_argument("--episodes", type=int, default=10, help="episodes per policy (default 10)")
     p.add_argument("--seed", type=int, default=0, help="first seed; every policy gets the same (default 0)")
     p.add_argument("--out", metavar="PNG", help="bar chart path (default compare_<env_id>.png)")
@@ -51,7 +55,9 @@ def run(args: argparse.Namespace) -> int:
         raise CLIError(f"--json {args.json!r} is a folder; give a file name")
     specs = args.policies or DEFAULT_POLICIES.get(args.env_id)
     if not specs:
-        raise CLIError(f"give --policies for {args.env_id} (defaults exist for {', '.join(DEFAULT_POLICIES)})")
+        raise CLIError(
+            f"give --policies for {args.env_id} (defaults exist for {', '.join(DEFAULT_POLICIES)})"
+        )
     results = compare(args.env_id, specs, args.episodes, args.seed)
     title = f"{args.env_id}: {episodes_on_seeds(args.episodes, args.seed)}"
     print(format_comparison(results, title))
@@ -60,9 +66,18 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)
-        clean = {s: {k: [m if math.isfinite(m) else None, d if math.isfinite(d) else None]
-                     for k, (m, d) in r.items()} for s, r in results.items()}
-        path.write_text(json.dumps({"env_id": args.env_id, "episodes": args.episodes, "seed": args.seed,
-                                    "results": clean}, indent=2))
+        clean = {
+            s: {
+                k: [m if math.isfinite(m) else None, d if math.isfinite(d) else None]
+                for k, (m, d) in r.items()
+            }
+            for s, r in results.items()
+        }
+        path.write_text(
+            json.dumps(
+                {"env_id": args.env_id, "episodes": args.episodes, "seed": args.seed, "results": clean},
+                indent=2,
+            )
+        )
         print(f"wrote {path}")
     return 0

@@ -10,8 +10,10 @@ from soft_snake_gym.cli.common import env_kwargs_from_args
 from soft_snake_gym.studies.convergence import DEFAULT_FACTORS, convergence, format_convergence
 
 NAME = "convergence"
-HELP = ("check that a policy's episode metrics do not change when the "
-        "integration step shrinks (exit code 1 if they do)")
+HELP = (
+    "check that a policy's episode metrics do not change when the "
+    "integration step shrinks (exit code 1 if they do)"
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -46,8 +48,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="start-up time left out of speed and error [s] (default 2)",
     )
     p.add_argument("--max-steps", type=int, help="episode length in control steps (default: the id's)")
-    p.add_argument("--env-config", metavar="YAML",
-                   help="YAML file of env keywords, or a shipped one by name (softeel, softworm, eel, worm)")
+    p.add_argument(
+        "--env-config",
+        metavar="YAML",
+        help="YAML file of env keywords, or a shipped one by name (softeel, softworm, eel, worm)",
+    )
     p.add_argument(
         "--env-kwarg",
         action="append",

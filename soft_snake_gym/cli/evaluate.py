@@ -27,22 +27,34 @@ HELP = "evaluate a baseline or a trained model for K episodes"
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The command's arguments."""
     p.add_argument("env_id", help="environment id, e.g. SoftEel-v0 or SoftWorm-v0")
-    p.add_argument("--policy", required=True,
-                   help="baseline name with options (pid, 'pid:alpha=0.5,omega=2.1', decentralized, "
-                        "'decentralized:closure=pacemaker', open-loop, inching, inching-pid) "
-                        "or the path to a saved SB3 model (.zip)")
-    p.add_argument("--policy-config", metavar="YAML",
-                   help="YAML file of the policy's gait/gains, or a shipped one by name (pid, pid_soft, "
-                        "open_loop, decentralized, inching)")
+    p.add_argument(
+        "--policy",
+        required=True,
+        help="baseline name with options (pid, 'pid:alpha=0.5,omega=2.1', decentralized, "
+        "'decentralized:closure=pacemaker', open-loop, inching, inching-pid) "
+        "or the path to a saved SB3 model (.zip)",
+    )
+    p.add_argument(
+        "--policy-config",
+        metavar="YAML",
+        help="YAML file of the policy's gait/gains, or a shipped one by name (pid, pid_soft, "
+        "open_loop, decentralized, inching)",
+    )
     p.add_argument("--episodes", type=int, default=3, help="number of episodes (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
-    p.add_argument("--transient", type=float,
-                   help="start-up time left out of speed and error [s] (default 2, or half the "
-                        "episode if that is shorter)")
+    p.add_argument(
+        "--transient",
+        type=float,
+        help="start-up time left out of speed and error [s] (default 2, or half the "
+        "episode if that is shorter)",
+    )
     add_env_arguments(p)
-    p.add_argument("--start-on-gait", action="store_true",
-                   help="start at rest on the policy's own serpenoid gait (curvatures = desired at t = 0, "
-                        "no start noise): the env keyword start_on_gait, for open-loop, pid, decentralized")
+    p.add_argument(
+        "--start-on-gait",
+        action="store_true",
+        help="start at rest on the policy's own serpenoid gait (curvatures = desired at t = 0, "
+        "no start noise): the env keyword start_on_gait, for open-loop, pid, decentralized",
+    )
     p.add_argument("--json", metavar="PATH", help="also write the per-episode metrics and summary")
     p.add_argument("--video", metavar="PATH", help="record the first episode (.mp4 or .gif)")
 
@@ -61,10 +73,13 @@ def run(args: argparse.Namespace) -> int:
     env_kwargs = env_kwargs_from_args(args)
     if args.start_on_gait:
         if "start_on_gait" in env_kwargs:
-            raise CLIError("--start-on-gait takes the gait from the policy; drop --env-kwarg start_on_gait...")
+            raise CLIError(
+                "--start-on-gait takes the gait from the policy; drop --env-kwarg start_on_gait..."
+            )
         env_kwargs["start_on_gait"] = policy_gait(args.policy, args.policy_config)
-    env = make_eval_env(args.env_id, seed=args.seed, env_kwargs=env_kwargs,
-                        render_mode="rgb_array" if args.video else None)
+    env = make_eval_env(
+        args.env_id, seed=args.seed, env_kwargs=env_kwargs, render_mode="rgb_array" if args.video else None
+    )
     inner = env.envs[0]
     limit = inner.spec.max_episode_steps if inner.spec is not None else None
     duration = limit * inner.unwrapped.dt if limit else math.inf
@@ -82,12 +97,18 @@ def run(args: argparse.Namespace) -> int:
     whole = sum(e["window_start"] != args.transient for e in episodes)
     window = f"metrics after a {args.transient:g} s transient"
     if whole:
-        window += (f" (over the whole episode for {whole} of {len(episodes)} that ended before "
-                   f"{2 * args.transient:g} s)")
+        window += (
+            f" (over the whole episode for {whole} of {len(episodes)} that ended before "
+            f"{2 * args.transient:g} s)"
+        )
     durations = sorted({round(e["duration"], 1) for e in episodes})
-    each = f"{durations[0]:.1f} s each" if len(durations) == 1 else f"{durations[0]:.1f}-{durations[-1]:.1f} s"
-    title = (f"{args.env_id}  policy={args.policy}  episodes={args.episodes}  "
-             f"({each}, {window}; {elapsed:.1f} s wall)")
+    each = (
+        f"{durations[0]:.1f} s each" if len(durations) == 1 else f"{durations[0]:.1f}-{durations[-1]:.1f} s"
+    )
+    title = (
+        f"{args.env_id}  policy={args.policy}  episodes={args.episodes}  "
+        f"({each}, {window}; {elapsed:.1f} s wall)"
+    )
     print(format_table(summary, title))
     failures = [e["failure"] for e in episodes if e["failure"]]
     if failures:
@@ -95,13 +116,27 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)
-        clean = [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in e.items()}
-                 for e in episodes]
-        path.write_text(json.dumps({
-            "env_id": args.env_id, "policy": args.policy, "episodes": clean,
-            "summary": {k: {"mean": (m if math.isfinite(m) else None), "std": (s if math.isfinite(s) else None)}
-                        for k, (m, s) in summary.items()},
-        }, indent=2))
+        clean = [
+            {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in e.items()}
+            for e in episodes
+        ]
+        path.write_text(
+            json.dumps(
+                {
+                    "env_id": args.env_id,
+                    "policy": args.policy,
+                    "episodes": clean,
+                    "summary": {
+                        k: {
+                            "mean": (m if math.isfinite(m) else None),
+                            "std": (s if math.isfinite(s) else None),
+                        }
+                        for k, (m, s) in summary.items()
+                    },
+                },
+                indent=2,
+            )
+        )
         print(f"wrote {path}")
     if args.video:
         print(f"wrote {args.video}")

@@ -123,6 +123,9 @@ def run(args: argparse.Namespace) -> int:
         bad = [r for r in read_results(res["csv"]).values() if str(r.get("failure", "")).startswith("error:")]
         if bad:
             errors += len(bad)
-            print(f"{name}: {len(bad)} cells could not run, e.g. {bad[0]['key']}: {bad[0]['failure']} "
-                  f"(failure column of {res['csv']})", file=sys.stderr)
+            print(
+                f"{name}: {len(bad)} cells could not run, e.g. {bad[0]['key']}: {bad[0]['failure']} "
+                f"(failure column of {res['csv']})",
+                file=sys.stderr,
+            )
     return 1 if errors else 0

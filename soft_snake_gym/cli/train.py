@@ -31,11 +31,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The command's arguments."""
     p.add_argument("env_id", nargs="?", default="SoftEel-v0", help="environment id (default SoftEel-v0)")
     p.add_argument("--algo", default="PPO", type=str.upper, choices=ALGOS, help="algorithm (default PPO)")
-    p.add_argument("--config", metavar="YAML",
-                   help="zoo-style hyperparameter file keyed by env id (default: the package's "
-                        "configs/algorithm/<algo>.yml)")
-    p.add_argument("--hyperparams", nargs="+", metavar="KEY=VALUE",
-                   help="override run settings or hyperparameters, e.g. gamma=0.999 n_envs=4")
+    p.add_argument(
+        "--config",
+        metavar="YAML",
+        help="zoo-style hyperparameter file keyed by env id (default: the package's "
+        "configs/algorithm/<algo>.yml)",
+    )
+    p.add_argument(
+        "--hyperparams",
+        nargs="+",
+        metavar="KEY=VALUE",
+        help="override run settings or hyperparameters, e.g. gamma=0.999 n_envs=4",
+    )
     p.add_argument("--n-timesteps", type=int, help="total environment steps (overrides the config)")
     p.add_argument("--seed", type=int, help="seed (overrides the config)")
     p.add_argument("--run-dir", metavar="DIR", help="run folder (default runs/<env>_<algo>_s<seed>)")
@@ -54,8 +61,10 @@ def _step_plan(cfg: TrainConfig, start: int) -> str:
         text += f" ({cfg.n_timesteps:,} rounded up to whole {what} = {chunk:,} steps)"
     freq = cfg.checkpoint_freq
     if freq and freq % cfg.n_envs:
-        text += (f"; checkpoints at the first step at or past each multiple of {freq:,} (the {cfg.n_envs} "
-                 f"envs step together)")
+        text += (
+            f"; checkpoints at the first step at or past each multiple of {freq:,} (the {cfg.n_envs} "
+            f"envs step together)"
+        )
     return text
 
 
@@ -83,15 +92,19 @@ def run(args: argparse.Namespace) -> int:
         run_dir = Path(args.run_dir or f"runs/{cfg.env_id}_{cfg.algo}_s{cfg.seed}")
     found = latest_checkpoint(run_dir) if args.resume and run_dir.is_dir() else None
     start = int(found[0].stem.split("_")[1]) if found else 0
-    print(f"training {cfg.algo} on {cfg.env_id} {_step_plan(cfg, start)} with {cfg.n_envs} envs "
-          f"-> {run_dir}" + (" (resumed)" if args.resume else ""))
+    print(
+        f"training {cfg.algo} on {cfg.env_id} {_step_plan(cfg, start)} with {cfg.n_envs} envs "
+        f"-> {run_dir}" + (" (resumed)" if args.resume else "")
+    )
     t0 = time.time()
     try:
         final = train(cfg, run_dir, resume=bool(args.resume), progress=not args.no_progress)
     except KeyboardInterrupt as err:
         how = "terminated (SIGTERM)" if isinstance(err, Terminated) else "interrupted"
-        print(f"{how}; a checkpoint was saved. Continue with: soft-snake train --resume {run_dir}",
-              file=sys.stderr)
+        print(
+            f"{how}; a checkpoint was saved. Continue with: soft-snake train --resume {run_dir}",
+            file=sys.stderr,
+        )
         return 143 if isinstance(err, Terminated) else 130
     wall = time.time() - t0
     print(f"done in {wall:.0f} s; final model {final}")
@@ -99,11 +112,15 @@ def run(args: argparse.Namespace) -> int:
     if curve.is_file():
         with open(curve) as fh:
             last = list(csv.DictReader(fh))[-1]
-        line = (f"last evaluation at {last['timesteps']} steps: return {float(last['return_mean']):.4g}, "
-                f"average speed {float(last['average_speed_mean']):.4g} m/s")
+        line = (
+            f"last evaluation at {last['timesteps']} steps: return {float(last['return_mean']):.4g}, "
+            f"average speed {float(last['average_speed_mean']):.4g} m/s"
+        )
         if "baseline_return" in last:
-            line += (f" (baseline {cfg.baseline_spec}: return {float(last['baseline_return']):.4g}, "
-                     f"average speed {float(last['baseline_average_speed']):.4g} m/s)")
+            line += (
+                f" (baseline {cfg.baseline_spec}: return {float(last['baseline_return']):.4g}, "
+                f"average speed {float(last['baseline_average_speed']):.4g} m/s)"
+            )
         print(line)
     print(f"evaluate it with: soft-snake evaluate {cfg.env_id} --policy {run_dir}")
     return 0

@@ -41,6 +41,7 @@ __all__ = [
 SLOW_SUBSTEPS = 1000
 """Explicit sub-steps per integrator step above which an env warns that it will be slow."""
 
+
 # --- settings ---------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Randomization:
@@ -67,9 +68,16 @@ class Randomization:
     mu_d: tuple[float, float] | None = None
 
     _SECTIONS: ClassVar[dict[str, str]] = {
-        "E": "rod", "E_bend": "rod", "damping_bend": "rod", "damping_stretch": "rod",
-        "rho": "fluid", "C_f": "fluid",
-        "C_D": "fluid", "C_A": "fluid", "mu_s": "ground", "mu_d": "ground",
+        "E": "rod",
+        "E_bend": "rod",
+        "damping_bend": "rod",
+        "damping_stretch": "rod",
+        "rho": "fluid",
+        "C_f": "fluid",
+        "C_D": "fluid",
+        "C_A": "fluid",
+        "mu_s": "ground",
+        "mu_d": "ground",
     }
 
     def __post_init__(self) -> None:
@@ -91,7 +99,9 @@ class Randomization:
             positive = f.name in ("E", "E_bend")
             if lo > hi or lo < 0 or (positive and lo <= 0):
                 allowed = "0 < low <= high" if positive else "0 <= low <= high"
-                raise ValueError(f"Randomization.{f.name} = {list(rng)!r} is not a valid range: need {allowed}")
+                raise ValueError(
+                    f"Randomization.{f.name} = {list(rng)!r} is not a valid range: need {allowed}"
+                )
 
     @property
     def enabled(self) -> bool:
@@ -121,8 +131,11 @@ class Randomization:
         """Raise ``ConfigError`` if a randomized parameter has no effect in ``medium`` or if
         a draw could give ``mu_d > mu_s`` (with ``ground`` the values not randomized)."""
         unused = {"water": "ground", "ground": "fluid"}.get(medium)
-        useless = [f.name for f in dataclasses.fields(self)
-                   if getattr(self, f.name) is not None and self._SECTIONS[f.name] == unused]
+        useless = [
+            f.name
+            for f in dataclasses.fields(self)
+            if getattr(self, f.name) is not None and self._SECTIONS[f.name] == unused
+        ]
         if useless:
             raise ConfigError(
                 f"{where}.randomize: {', '.join(useless)} {'has' if len(useless) == 1 else 'have'} no "
@@ -182,8 +195,9 @@ class BaseSettings:
         check_number(f"{cls}.max_observed_speed", self.max_observed_speed, 0.0, lo_open=True)
 
 
-def resolve_settings(settings_cls: type, medium: str, config: str | Path | None, kwargs: dict,
-                     label: str | None = None) -> Any:
+def resolve_settings(
+    settings_cls: type, medium: str, config: str | Path | None, kwargs: dict, label: str | None = None
+) -> Any:
     """Settings from a named preset, a YAML file of constructor keywords and explicit
     keywords, each overriding the one before.
 
@@ -276,8 +290,13 @@ class SoftRobotEnv(gym.Env):
         env._setup(settings, None, sim=sim, task=task)
         return env
 
-    def _setup(self, settings: BaseSettings, render_mode: str | None, sim: Simulator | None = None,
-               task: TaskArrays | None = None) -> None:
+    def _setup(
+        self,
+        settings: BaseSettings,
+        render_mode: str | None,
+        sim: Simulator | None = None,
+        task: TaskArrays | None = None,
+    ) -> None:
         settings.randomize.check(self.medium, settings.ground, self.env_id or type(self).__name__)
         self.settings = s = settings
         self.base_config = SimConfig(
@@ -359,8 +378,9 @@ class SoftRobotEnv(gym.Env):
         raise NotImplementedError
 
     # --- info: the one place it is built (the vector env calls these too) -------------------
-    def state_info(self, r: Any, time: Any, shape: np.ndarray, newton_iterations: Any,
-                   raw: np.ndarray) -> dict[str, Any]:
+    def state_info(
+        self, r: Any, time: Any, shape: np.ndarray, newton_iterations: Any, raw: np.ndarray
+    ) -> dict[str, Any]:
         """The state entries of ``info``, for this robot or, as arrays over robots, for a batch.
 
         Args:
@@ -384,7 +404,9 @@ class SoftRobotEnv(gym.Env):
 
     def _own_state_info(self, r: list[float]) -> dict[str, Any]:
         sim = self.sim
-        return self.state_info(r, sim.time, getattr(sim, self.shape_key), sim.newton_iterations, self.task.raw)
+        return self.state_info(
+            r, sim.time, getattr(sim, self.shape_key), sim.newton_iterations, self.task.raw
+        )
 
     def _check_options(self, body: dict[str, np.ndarray]) -> None:
         """Reject an initial body from ``reset(options=...)`` that violates the env's bounds."""
@@ -514,13 +536,19 @@ class SoftRobotEnv(gym.Env):
             return None
         if self._renderer is None:
             self._renderer = BodyRenderer(
-                human=self.render_mode == "human", ground=self.medium == "ground",
-                body_length=self.base_config.rod.length, fps=self.metadata["render_fps"],
+                human=self.render_mode == "human",
+                ground=self.medium == "ground",
+                body_length=self.base_config.rod.length,
+                fps=self.metadata["render_fps"],
             )
         return self._renderer.draw(
             self.sim.x if self._failure is None else self._last_x,
-            np.asarray(self._trail_com), np.asarray(self._trail_head),
-            self.sim.time, self._goal, self.env_id, self._failure,
+            np.asarray(self._trail_com),
+            np.asarray(self._trail_head),
+            self.sim.time,
+            self._goal,
+            self.env_id,
+            self._failure,
             self.sim.stuck if self._failure is None and self.medium == "ground" else None,
         )
 
@@ -549,9 +577,7 @@ class SoftRobotEnv(gym.Env):
         try:
             a = np.array(action, dtype=np.float64)
         except (TypeError, ValueError) as err:
-            raise ValueError(
-                f"{self.env_id} action {action!r} is not an array of numbers: {err}"
-            ) from None
+            raise ValueError(f"{self.env_id} action {action!r} is not an array of numbers: {err}") from None
         if a.shape != self._act_shape:
             raise ValueError(
                 f"{self.env_id} action has shape {a.shape}; expected {self._act_shape} "

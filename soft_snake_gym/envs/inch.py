@@ -176,16 +176,30 @@ class InchEnv(SoftRobotEnv):
         l0 = self.base_config.rod.edge_length
         lo, hi = s.rest_length_limits[0] * l0, s.rest_length_limits[1] * l0
         self.observation_structure = {
-            "edge_lengths": m, "edge_length_rates": m, "lbar": m, "stuck": self.N, "com_velocity_body": 2,
+            "edge_lengths": m,
+            "edge_length_rates": m,
+            "lbar": m,
+            "stuck": self.N,
+            "com_velocity_body": 2,
         }
-        low = np.concatenate([
-            np.zeros(m), np.full(m, -10.0 * self.max_length_rate), np.full(m, lo), np.zeros(self.N),
-            np.full(2, -s.max_observed_speed),
-        ]).astype(np.float32)
-        high = np.concatenate([
-            np.full(m, 2.0 * hi), np.full(m, 10.0 * self.max_length_rate), np.full(m, hi), np.ones(self.N),
-            np.full(2, s.max_observed_speed),
-        ]).astype(np.float32)
+        low = np.concatenate(
+            [
+                np.zeros(m),
+                np.full(m, -10.0 * self.max_length_rate),
+                np.full(m, lo),
+                np.zeros(self.N),
+                np.full(2, -s.max_observed_speed),
+            ]
+        ).astype(np.float32)
+        high = np.concatenate(
+            [
+                np.full(m, 2.0 * hi),
+                np.full(m, 10.0 * self.max_length_rate),
+                np.full(m, hi),
+                np.ones(self.N),
+                np.full(2, s.max_observed_speed),
+            ]
+        ).astype(np.float32)
         self.observation_space = Box(low, high, dtype=np.float32)
         self.action_space = Box(-1.0, 1.0, (m,), dtype=np.float32)
 
@@ -196,7 +210,9 @@ class InchEnv(SoftRobotEnv):
 
     def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
         body = self._noisy_straight_body(
-            rng, np.zeros(self.N - 2), np.full(self.N - 1, self.base_config.rod.edge_length),
+            rng,
+            np.zeros(self.N - 2),
+            np.full(self.N - 1, self.base_config.rod.edge_length),
             length_noise=True,
         )
         np.clip(body["lbar"], *self.lbar_limits, out=body["lbar"])
@@ -213,4 +229,8 @@ class InchEnv(SoftRobotEnv):
 
     def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
         m = self.N - 1
-        return {"edge_lengths": raw[..., :m].copy(), "lbar": shape, "stuck": raw[..., 3 * m : 4 * m + 1] > 0.5}
+        return {
+            "edge_lengths": raw[..., :m].copy(),
+            "lbar": shape,
+            "stuck": raw[..., 3 * m : 4 * m + 1] > 0.5,
+        }

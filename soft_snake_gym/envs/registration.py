@@ -30,5 +30,9 @@ def register_envs() -> None:
     entry points) unless already registered."""
     for env_id, entry_point in ENV_IDS.items():
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point=entry_point, max_episode_steps=MAX_EPISODE_STEPS,
-                         vector_entry_point=VECTOR_ENTRY_POINTS[env_id])
+            gym.register(
+                id=env_id,
+                entry_point=entry_point,
+                max_episode_steps=MAX_EPISODE_STEPS,
+                vector_entry_point=VECTOR_ENTRY_POINTS[env_id],
+            )

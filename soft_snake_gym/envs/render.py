@@ -29,6 +29,7 @@ def require_interactive_backend() -> None:
             "TkAgg or QtAgg on a machine with a display, or use render_mode='rgb_array'"
         )
 
+
 _WATER = "#d8ecf7"
 _GROUND = "#efe6d2"
 
@@ -46,8 +47,14 @@ class BodyRenderer:
         size: image width and height in pixels.
     """
 
-    def __init__(self, human: bool = False, ground: bool = False, body_length: float = 1.62,
-                 fps: int = 100, size: tuple[int, int] = (480, 360)) -> None:
+    def __init__(
+        self,
+        human: bool = False,
+        ground: bool = False,
+        body_length: float = 1.62,
+        fps: int = 100,
+        size: tuple[int, int] = (480, 360),
+    ) -> None:
         from matplotlib.figure import Figure
 
         self.human = human
@@ -90,14 +97,40 @@ class BodyRenderer:
         self._goal = None
         (self._scale,) = ax.plot([], [], color="black", lw=2.5, zorder=6)
         self._scale_text = ax.text(0, 0, f"{bar:g} m", ha="center", va="bottom", fontsize=9, zorder=6)
-        self._time_text = ax.text(0.02, 0.97, "", transform=ax.transAxes, ha="left", va="top",
-                                  fontsize=10, family="monospace", zorder=6)
-        self._status_text = ax.text(0.98, 0.97, "", transform=ax.transAxes, ha="right", va="top",
-                                    fontsize=9, color="#d62728", zorder=6)
+        self._time_text = ax.text(
+            0.02,
+            0.97,
+            "",
+            transform=ax.transAxes,
+            ha="left",
+            va="top",
+            fontsize=10,
+            family="monospace",
+            zorder=6,
+        )
+        self._status_text = ax.text(
+            0.98,
+            0.97,
+            "",
+            transform=ax.transAxes,
+            ha="right",
+            va="top",
+            fontsize=9,
+            color="#d62728",
+            zorder=6,
+        )
 
-    def draw(self, x: np.ndarray, trail_com: np.ndarray, trail_head: np.ndarray, time: float,
-             goal: np.ndarray, title: str = "", failure: str | None = None,
-             stuck: np.ndarray | None = None) -> np.ndarray | None:
+    def draw(
+        self,
+        x: np.ndarray,
+        trail_com: np.ndarray,
+        trail_head: np.ndarray,
+        time: float,
+        goal: np.ndarray,
+        title: str = "",
+        failure: str | None = None,
+        stuck: np.ndarray | None = None,
+    ) -> np.ndarray | None:
         """Draw one frame.
 
         Args:
@@ -134,8 +167,13 @@ class BodyRenderer:
             self._goal.remove()
         gx, gy = x0 + 0.08 * self.width, y0 + 0.08 * self.height
         self._goal = self.ax.annotate(
-            "goal", xy=(gx + 0.1 * self.width * goal[0], gy + 0.1 * self.width * goal[1]),
-            xytext=(gx, gy), fontsize=8, color="#2ca02c", va="center", ha="center",
+            "goal",
+            xy=(gx + 0.1 * self.width * goal[0], gy + 0.1 * self.width * goal[1]),
+            xytext=(gx, gy),
+            fontsize=8,
+            color="#2ca02c",
+            va="center",
+            ha="center",
             arrowprops={"arrowstyle": "->", "color": "#2ca02c", "lw": 1.5},
         )
         self._time_text.set_text(f"{title}  t = {time:6.2f} s".strip())

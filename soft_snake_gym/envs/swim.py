@@ -256,15 +256,21 @@ class SwimEnv(SoftRobotEnv):
         s = self.settings
         n = self.N - 2
         self.observation_structure = {
-            "kappa": n, "kappa_dot": n, "kbar": n, "com_velocity_body": 2, "goal_direction_body": 2,
+            "kappa": n,
+            "kappa_dot": n,
+            "kbar": n,
+            "com_velocity_body": 2,
+            "goal_direction_body": 2,
         }
-        high = np.concatenate([
-            np.full(n, 2.0 * self.max_rest_curvature),
-            np.full(n, 4.0 * self.max_curvature_rate),
-            np.full(n, self.max_rest_curvature),
-            np.full(2, s.max_observed_speed),
-            np.ones(2),
-        ]).astype(np.float32)
+        high = np.concatenate(
+            [
+                np.full(n, 2.0 * self.max_rest_curvature),
+                np.full(n, 4.0 * self.max_curvature_rate),
+                np.full(n, self.max_rest_curvature),
+                np.full(2, s.max_observed_speed),
+                np.ones(2),
+            ]
+        ).astype(np.float32)
         self.observation_space = Box(-high, high, dtype=np.float32)
         self.action_space = Box(-1.0, 1.0, (n,), dtype=np.float32)
 

@@ -47,13 +47,44 @@ drop_stale_cache(__file__, [m.__file__ for m in (banded, forces, geometry, L, st
 # --- task constants tp ------------------------------------------------------------------------
 SWIM, INCH = 0, 1
 ENERGY_ACTUATOR, ENERGY_MEDIUM = 0, 1
-(T_KIND, T_SCALE, T_LO, T_HI, T_DT, T_NSUB, T_GOAL, T_GCOS, T_GSIN, T_WF, T_WE, T_WC, T_FAIL,
- T_ESRC, T_MASS) = range(15)
+(
+    T_KIND,
+    T_SCALE,
+    T_LO,
+    T_HI,
+    T_DT,
+    T_NSUB,
+    T_GOAL,
+    T_GCOS,
+    T_GSIN,
+    T_WF,
+    T_WE,
+    T_WC,
+    T_FAIL,
+    T_ESRC,
+    T_MASS,
+) = range(15)
 N_TP = 15
 
 # --- task state rs ----------------------------------------------------------------------------
-(R_STATUS, R_COMX, R_COMY, R_COM0X, R_COM0Y, R_HEADING, R_P_ACT, R_P_MED, R_FWD, R_EPOW, R_ASQ,
- R_RF, R_RE, R_RC, R_RFAIL, R_REWARD) = range(16)
+(
+    R_STATUS,
+    R_COMX,
+    R_COMY,
+    R_COM0X,
+    R_COM0Y,
+    R_HEADING,
+    R_P_ACT,
+    R_P_MED,
+    R_FWD,
+    R_EPOW,
+    R_ASQ,
+    R_RF,
+    R_RE,
+    R_RC,
+    R_RFAIL,
+    R_REWARD,
+) = range(16)
 M0 = 16
 (M_AVG, M_DIST, M_DISP, M_DUR, M_COT, M_EMED, M_EACT, M_WACT) = range(M0, M0 + 8)
 N_RS = M0 + 8
@@ -64,8 +95,16 @@ BAD_ACTION = -1
 TERM_KEYS = ("reward_forward", "reward_energy", "reward_ctrl", "reward_failure")
 """Names of the reward terms ``rs[R_RF:R_RFAIL+1]``."""
 
-METRIC_KEYS = ("average_speed", "distance", "displacement", "duration", "cost_of_transport",
-               None, "energy_actuator", "actuator_work")
+METRIC_KEYS = (
+    "average_speed",
+    "distance",
+    "displacement",
+    "duration",
+    "cost_of_transport",
+    None,
+    "energy_actuator",
+    "actuator_work",
+)
 """Names of the metrics ``rs[M_AVG:]``; ``None`` is the medium's energy (``energy_fluid`` or
 ``energy_friction``)."""
 
@@ -141,8 +180,9 @@ def _observe(s, t):
     if int(t.tp[T_KIND]) == SWIM:
         return observe.swim_observation(s.q, s.v, s.kbar, t.w, t.tp[T_GOAL], t.low, t.high, t.raw, t.obs)
     ground = int(s.prm[L.P_MEDIUM]) == L.MEDIUM_GROUND
-    return observe.inch_observation(s.q, s.v, s.lbar, s.ibuf[L.I_FRICTION], ground, t.w, t.low, t.high,
-                                    t.raw, t.obs)
+    return observe.inch_observation(
+        s.q, s.v, s.lbar, s.ibuf[L.I_FRICTION], ground, t.w, t.low, t.high, t.raw, t.obs
+    )
 
 
 @njit(cache=True, error_model="numpy")
@@ -255,8 +295,9 @@ def _robot(s, t, i):
     """Robot ``i``'s views of stacked simulator and task arrays."""
     return (
         SimArrays(s.q[i], s.v[i], s.kbar[i], s.lbar[i], s.prm[i], s.buf[i], s.J[i], s.ibuf[i], s.out[i]),
-        TaskArrays(t.tp[i], t.rs[i], t.act[i], t.uk[i], t.ul[i], t.w[i], t.low[i], t.high[i], t.raw[i],
-                   t.obs[i]),
+        TaskArrays(
+            t.tp[i], t.rs[i], t.act[i], t.uk[i], t.ul[i], t.w[i], t.low[i], t.high[i], t.raw[i], t.obs[i]
+        ),
     )
 
 

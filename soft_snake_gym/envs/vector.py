@@ -130,12 +130,18 @@ class SoftVectorEnv(VectorEnv):
         env_cls = ENV_CLASSES[env_id]
         n = check_int("num_envs", num_envs, 1, hint="the number of robots")
         if max_episode_steps is not None:
-            max_episode_steps = check_int("max_episode_steps", max_episode_steps, 1,
-                                          hint="or None for no time limit")
+            max_episode_steps = check_int(
+                "max_episode_steps", max_episode_steps, 1, hint="or None for no time limit"
+            )
         max_threads = numba.config.NUMBA_NUM_THREADS
         if num_threads is not None:
-            num_threads = check_int("num_threads", num_threads, 1, max_threads,
-                                    hint=f"NUMBA_NUM_THREADS = {max_threads}; or None for the default")
+            num_threads = check_int(
+                "num_threads",
+                num_threads,
+                1,
+                max_threads,
+                hint=f"NUMBA_NUM_THREADS = {max_threads}; or None for the default",
+            )
         try:
             mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -156,8 +162,13 @@ class SoftVectorEnv(VectorEnv):
         self.max_episode_steps = max_episode_steps
         self.autoreset_mode = mode
         self.render_mode = None
-        base_config = SimConfig(rod=settings.rod, medium=env_cls.medium, fluid=settings.fluid,
-                                ground=settings.ground, integrator=settings.integrator)
+        base_config = SimConfig(
+            rod=settings.rod,
+            medium=env_cls.medium,
+            fluid=settings.fluid,
+            ground=settings.ground,
+            integrator=settings.integrator,
+        )
         if num_threads is None:  # a thread pays for its wake-up only with enough robots to share
             num_threads = min(max_threads, max(1, n // ROBOTS_PER_THREAD))
         self.num_threads = int(num_threads)
@@ -178,7 +189,11 @@ class SoftVectorEnv(VectorEnv):
         self.single_action_space: Box = proto.action_space
         self.observation_space = batch_space(self.single_observation_space, n)
         self.action_space = batch_space(self.single_action_space, n)
-        self.metadata = {"autoreset_mode": mode, "render_modes": [], "render_fps": proto.metadata["render_fps"]}
+        self.metadata = {
+            "autoreset_mode": mode,
+            "render_modes": [],
+            "render_fps": proto.metadata["render_fps"],
+        }
         self.metric_keys = proto.metric_keys
         """Names of the running episode metrics in ``info["metrics"]``."""
         self._proto = proto  # builds the infos, as each robot's env does
@@ -268,11 +283,15 @@ class SoftVectorEnv(VectorEnv):
             (terminated, truncated), (n,) bool each, False for robots not stepped.
         """
         act = self.batch.task.act
-        if not (type(actions) is np.ndarray and actions.shape == self._act_shape and actions.dtype.kind == "f"):
+        if not (
+            type(actions) is np.ndarray and actions.shape == self._act_shape and actions.dtype.kind == "f"
+        ):
             try:
                 actions = np.asarray(actions, dtype=np.float64)
             except (TypeError, ValueError) as err:
-                raise ValueError(f"{self.env_id} vector env actions are not an array of numbers: {err}") from None
+                raise ValueError(
+                    f"{self.env_id} vector env actions are not an array of numbers: {err}"
+                ) from None
             if actions.shape != self._act_shape:
                 raise ValueError(
                     f"{self.env_id} vector env actions have shape {actions.shape}; expected "

@@ -15,4 +15,11 @@ from soft_snake_gym.physics.simulator import (
     node_masses,
 )
 
-__all__ = ["SimArrays", "Simulator", "SimulationError", "allocate_arrays", "body_from_curvature", "node_masses"]
+__all__ = [
+    "SimArrays",
+    "Simulator",
+    "SimulationError",
+    "allocate_arrays",
+    "body_from_curvature",
+    "node_masses",
+]

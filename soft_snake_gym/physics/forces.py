@@ -113,8 +113,14 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
         s = kb * dk * w  # dE/dphi
         phidot = 0.0
         if db > 0.0:
-            phidot = (g0x * v[2 * j - 2] + g0y * v[2 * j - 1] + g1x * v[2 * j]
-                      + g1y * v[2 * j + 1] + g2x * v[2 * j + 2] + g2y * v[2 * j + 3])
+            phidot = (
+                g0x * v[2 * j - 2]
+                + g0y * v[2 * j - 1]
+                + g1x * v[2 * j]
+                + g1y * v[2 * j + 1]
+                + g2x * v[2 * j + 2]
+                + g2y * v[2 * j + 3]
+            )
             s += db * w * w * phidot  # -d kappa_dot mapped through d kappa/d x
         F[2 * j - 2] -= s * g0x
         F[2 * j - 1] -= s * g0y
@@ -146,26 +152,75 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
                     add_block(J, a, j, c * gx * r1x, c * gx * r1y, c * gy * r1x, c * gy * r1y)
                     add_block(J, a, j + 1, c * gx * r2x, c * gx * r2y, c * gy * r2x, c * gy * r2y)
             # d2phi blocks: (0,0) -Ha, (0,1) Ha, (1,1) Hb - Ha, (1,2) -Hb, (2,2) Hb
-            add_block(J, j - 1, j - 1, alpha * g0x * g0x - beta * ha00, alpha * g0x * g0y - beta * ha01,
-                       alpha * g0y * g0x - beta * ha01, alpha * g0y * g0y - beta * ha11)
-            add_block(J, j - 1, j, alpha * g0x * g1x + beta * ha00, alpha * g0x * g1y + beta * ha01,
-                       alpha * g0y * g1x + beta * ha01, alpha * g0y * g1y + beta * ha11)
-            add_block(J, j, j - 1, alpha * g1x * g0x + beta * ha00, alpha * g1x * g0y + beta * ha01,
-                       alpha * g1y * g0x + beta * ha01, alpha * g1y * g0y + beta * ha11)
-            add_block(J, j - 1, j + 1, alpha * g0x * g2x, alpha * g0x * g2y,
-                       alpha * g0y * g2x, alpha * g0y * g2y)
-            add_block(J, j + 1, j - 1, alpha * g2x * g0x, alpha * g2x * g0y,
-                       alpha * g2y * g0x, alpha * g2y * g0y)
-            add_block(J, j, j, alpha * g1x * g1x + beta * (hb00 - ha00),
-                       alpha * g1x * g1y + beta * (hb01 - ha01),
-                       alpha * g1y * g1x + beta * (hb01 - ha01),
-                       alpha * g1y * g1y + beta * (hb11 - ha11))
-            add_block(J, j, j + 1, alpha * g1x * g2x - beta * hb00, alpha * g1x * g2y - beta * hb01,
-                       alpha * g1y * g2x - beta * hb01, alpha * g1y * g2y - beta * hb11)
-            add_block(J, j + 1, j, alpha * g2x * g1x - beta * hb00, alpha * g2x * g1y - beta * hb01,
-                       alpha * g2y * g1x - beta * hb01, alpha * g2y * g1y - beta * hb11)
-            add_block(J, j + 1, j + 1, alpha * g2x * g2x + beta * hb00, alpha * g2x * g2y + beta * hb01,
-                       alpha * g2y * g2x + beta * hb01, alpha * g2y * g2y + beta * hb11)
+            add_block(
+                J,
+                j - 1,
+                j - 1,
+                alpha * g0x * g0x - beta * ha00,
+                alpha * g0x * g0y - beta * ha01,
+                alpha * g0y * g0x - beta * ha01,
+                alpha * g0y * g0y - beta * ha11,
+            )
+            add_block(
+                J,
+                j - 1,
+                j,
+                alpha * g0x * g1x + beta * ha00,
+                alpha * g0x * g1y + beta * ha01,
+                alpha * g0y * g1x + beta * ha01,
+                alpha * g0y * g1y + beta * ha11,
+            )
+            add_block(
+                J,
+                j,
+                j - 1,
+                alpha * g1x * g0x + beta * ha00,
+                alpha * g1x * g0y + beta * ha01,
+                alpha * g1y * g0x + beta * ha01,
+                alpha * g1y * g0y + beta * ha11,
+            )
+            add_block(
+                J, j - 1, j + 1, alpha * g0x * g2x, alpha * g0x * g2y, alpha * g0y * g2x, alpha * g0y * g2y
+            )
+            add_block(
+                J, j + 1, j - 1, alpha * g2x * g0x, alpha * g2x * g0y, alpha * g2y * g0x, alpha * g2y * g0y
+            )
+            add_block(
+                J,
+                j,
+                j,
+                alpha * g1x * g1x + beta * (hb00 - ha00),
+                alpha * g1x * g1y + beta * (hb01 - ha01),
+                alpha * g1y * g1x + beta * (hb01 - ha01),
+                alpha * g1y * g1y + beta * (hb11 - ha11),
+            )
+            add_block(
+                J,
+                j,
+                j + 1,
+                alpha * g1x * g2x - beta * hb00,
+                alpha * g1x * g2y - beta * hb01,
+                alpha * g1y * g2x - beta * hb01,
+                alpha * g1y * g2y - beta * hb11,
+            )
+            add_block(
+                J,
+                j + 1,
+                j,
+                alpha * g2x * g1x - beta * hb00,
+                alpha * g2x * g1y - beta * hb01,
+                alpha * g2y * g1x - beta * hb01,
+                alpha * g2y * g1y - beta * hb11,
+            )
+            add_block(
+                J,
+                j + 1,
+                j + 1,
+                alpha * g2x * g2x + beta * hb00,
+                alpha * g2x * g2y + beta * hb01,
+                alpha * g2y * g2x + beta * hb01,
+                alpha * g2y * g2y + beta * hb11,
+            )
     if not water:
         return 0.0
     # drag (docs/model.md §4): F = -c_t l (v_t + v_t|v_t|) t - c_n l (v_n + v_n|v_n|) n, half per node
@@ -194,14 +249,22 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
             # d F_edge / d e (e = x[i+1] - x[i]), half of it per node, sign by node
             #   = -ct [gt t t^T + dgt vn t n^T + gt n n^T] - cn [gn n t^T - dgn vt n n^T - gn t n^T]
             hx = 0.5 * cx
-            d00 = -hx * (ct * (gt * tx * tx + dgt * vn * tx * nx + gt * nx * nx)
-                         + cn * (gn * nx * tx - dgn * vt * nx * nx - gn * tx * nx))
-            d01 = -hx * (ct * (gt * tx * ty + dgt * vn * tx * ny + gt * nx * ny)
-                         + cn * (gn * nx * ty - dgn * vt * nx * ny - gn * tx * ny))
-            d10 = -hx * (ct * (gt * ty * tx + dgt * vn * ty * nx + gt * ny * nx)
-                         + cn * (gn * ny * tx - dgn * vt * ny * nx - gn * ty * nx))
-            d11 = -hx * (ct * (gt * ty * ty + dgt * vn * ty * ny + gt * ny * ny)
-                         + cn * (gn * ny * ty - dgn * vt * ny * ny - gn * ty * ny))
+            d00 = -hx * (
+                ct * (gt * tx * tx + dgt * vn * tx * nx + gt * nx * nx)
+                + cn * (gn * nx * tx - dgn * vt * nx * nx - gn * tx * nx)
+            )
+            d01 = -hx * (
+                ct * (gt * tx * ty + dgt * vn * tx * ny + gt * nx * ny)
+                + cn * (gn * nx * ty - dgn * vt * nx * ny - gn * tx * ny)
+            )
+            d10 = -hx * (
+                ct * (gt * ty * tx + dgt * vn * ty * nx + gt * ny * nx)
+                + cn * (gn * ny * tx - dgn * vt * ny * nx - gn * ty * nx)
+            )
+            d11 = -hx * (
+                ct * (gt * ty * ty + dgt * vn * ty * ny + gt * ny * ny)
+                + cn * (gn * ny * ty - dgn * vt * ny * ny - gn * ty * ny)
+            )
             for a in (i, i + 1):
                 add_block(J, a, i, c00 - d00, c01 - d01, c01 - d10, c11 - d11)
                 add_block(J, a, i + 1, c00 + d00, c01 + d01, c01 + d10, c11 + d11)
@@ -295,7 +358,9 @@ def fluid_momentum(q, v, prm, R, sp, sg, J, dt, jac):
                     sb = 2.0 * ib - 1.0
                     h = hc * sa * sb
                     add_block(
-                        J, i + ia, i + ib,
+                        J,
+                        i + ia,
+                        i + ib,
                         a * nx * nx + hd * (sb * d00 - sa * d00) - h * nx * nx,
                         a * nx * ny + hd * (sb * d01 - sa * d10) - h * nx * ny,
                         a * ny * nx + hd * (sb * d10 - sa * d01) - h * ny * nx,
@@ -362,8 +427,14 @@ def damping_power(q, v, prm):
     if db > 0.0:
         for j in range(1, N - 1):
             k, g0x, g0y, g1x, g1y, g2x, g2y = turning(q, j)[:7]
-            kd = (1.0 + 0.25 * k * k) * (g0x * v[2 * j - 2] + g0y * v[2 * j - 1] + g1x * v[2 * j]
-                                         + g1y * v[2 * j + 1] + g2x * v[2 * j + 2] + g2y * v[2 * j + 3])
+            kd = (1.0 + 0.25 * k * k) * (
+                g0x * v[2 * j - 2]
+                + g0y * v[2 * j - 1]
+                + g1x * v[2 * j]
+                + g1y * v[2 * j + 1]
+                + g2x * v[2 * j + 2]
+                + g2y * v[2 * j + 3]
+            )
             p += db * kd * kd
     return p
 
@@ -402,8 +473,14 @@ def kinetic_friction(q, v, i, fn, eps2, prm):
     if prm[P_ANISO] == 0.0:
         c = prm[P_MUD] * fn
         s3 = s * s * s
-        return (-c * vx / s, -c * vy / s, -c * (1.0 / s - vx * vx / s3), c * vx * vy / s3,
-                c * vx * vy / s3, -c * (1.0 / s - vy * vy / s3))
+        return (
+            -c * vx / s,
+            -c * vy / s,
+            -c * (1.0 / s - vx * vx / s3),
+            c * vx * vy / s3,
+            c * vx * vy / s3,
+            -c * (1.0 / s - vy * vy / s3),
+        )
     tx, ty = node_tangent(q, i)
     nx, ny = -ty, tx
     vt = vx * tx + vy * ty
@@ -417,5 +494,11 @@ def kinetic_friction(q, v, i, fn, eps2, prm):
     a00 = fn * (mt * tx * tx + mn * nx * nx)
     a01 = fn * (mt * tx * ty + mn * nx * ny)
     a11 = fn * (mt * ty * ty + mn * ny * ny)
-    return (-gx / s, -gy / s, -a00 / s + gx * vx / s3, -a01 / s + gx * vy / s3,
-            -a01 / s + gy * vx / s3, -a11 / s + gy * vy / s3)
+    return (
+        -gx / s,
+        -gy / s,
+        -a00 / s + gx * vx / s3,
+        -a01 / s + gx * vy / s3,
+        -a01 / s + gy * vx / s3,
+        -a11 / s + gy * vy / s3,
+    )

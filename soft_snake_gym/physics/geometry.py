@@ -63,8 +63,14 @@ def curvature_rates(q, v, kdot):
     """Exact curvature rate ``(1 + kappa^2/4)(theta_dot^j - theta_dot^(j-1))``, (N-2,) [1/s]."""
     for j in range(1, q.size // 2 - 1):
         k, g0x, g0y, g1x, g1y, g2x, g2y = turning(q, j)[:7]
-        phidot = (g0x * v[2 * j - 2] + g0y * v[2 * j - 1] + g1x * v[2 * j] + g1y * v[2 * j + 1]
-                  + g2x * v[2 * j + 2] + g2y * v[2 * j + 3])
+        phidot = (
+            g0x * v[2 * j - 2]
+            + g0y * v[2 * j - 1]
+            + g1x * v[2 * j]
+            + g1y * v[2 * j + 1]
+            + g2x * v[2 * j + 2]
+            + g2y * v[2 * j + 3]
+        )
         kdot[j - 1] = (1.0 + 0.25 * k * k) * phidot
 
 

@@ -27,7 +27,14 @@ from soft_snake_gym.physics.banded import WIDTH
 P_EA, P_EI, P_DBEND, P_RHO, P_CF, P_CD, P_CA, P_A, P_B = 0, 1, 2, 3, 4, 5, 6, 7, 8
 P_MUS, P_MUD, P_VTOL, P_G = 9, 10, 11, 12
 P_H, P_SUBSTEPS, P_TOL, P_MAXIT, P_MEDIUM, P_METHOD, P_MAXSTRAIN, P_CHECKSI = (
-    13, 14, 15, 16, 17, 18, 19, 20,
+    13,
+    14,
+    15,
+    16,
+    17,
+    18,
+    19,
+    20,
 )
 P_DSTRETCH = 21
 P_ADDED_MASS = 22  # ADDED_MASS_* code
@@ -49,8 +56,19 @@ SLIDING, STUCK = 0, 1
 MAX_SWITCHES = 2  # contact changes per node and step: bounds the active-set passes
 
 # --- diagnostics -----------------------------------------------------------------------------
-(O_STATUS, O_NITER, O_RESIDUAL, O_P_FLUID, O_P_FRICTION, O_P_ACT, O_E_FLUID, O_E_FRICTION,
- O_E_ACT, O_W_ACT, O_NSTEPS) = range(11)
+(
+    O_STATUS,
+    O_NITER,
+    O_RESIDUAL,
+    O_P_FLUID,
+    O_P_FRICTION,
+    O_P_ACT,
+    O_E_FLUID,
+    O_E_FRICTION,
+    O_E_ACT,
+    O_W_ACT,
+    O_NSTEPS,
+) = range(11)
 # energy ledger (docs/model.md §4): damping power of the last step and its accumulated energy, and
 # the body's kinetic and elastic energy and the water's kinetic energy T_f after the last step
 O_P_DAMP, O_E_DAMP, O_E_KIN, O_E_ELASTIC, O_T_FLUID = range(11, 16)
@@ -59,8 +77,16 @@ O_P_DAMP, O_E_DAMP, O_E_KIN, O_E_ELASTIC, O_T_FLUID = range(11, 16)
 O_L0_KIN, O_L0_ELASTIC, O_L0_T_FLUID, O_L0_W_ACT, O_L0_E_FLUID, O_L0_E_DAMP, O_L0_E_FRICTION = range(16, 23)
 # the ledger since then, ``out[O_LEDGER : O_LEDGER + 8]`` in the order of LEDGER_KEYS
 O_LEDGER, N_LEDGER = 23, 8
-LEDGER_KEYS = ("actuator_work", "fluid_dissipation", "damping_dissipation", "friction_dissipation",
-               "delta_kinetic", "delta_elastic", "delta_fluid_kinetic", "error")
+LEDGER_KEYS = (
+    "actuator_work",
+    "fluid_dissipation",
+    "damping_dissipation",
+    "friction_dissipation",
+    "delta_kinetic",
+    "delta_elastic",
+    "delta_fluid_kinetic",
+    "error",
+)
 N_OUT = 31  # simulated time is O_NSTEPS * h: derived, so it cannot drift
 
 # --- status codes ----------------------------------------------------------------------------

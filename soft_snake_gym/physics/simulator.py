@@ -109,9 +109,7 @@ def body_from_curvature(
     kbar = np.asarray(kbar, dtype=float)
     lbar = np.asarray(lbar, dtype=float)
     if kbar.ndim != 1 or lbar.ndim != 1 or kbar.size != lbar.size - 1:
-        raise ValueError(
-            f"kbar has shape {kbar.shape} and lbar {lbar.shape}: need (N-2,) and (N-1,)"
-        )
+        raise ValueError(f"kbar has shape {kbar.shape} and lbar {lbar.shape}: need (N-2,) and (N-1,)")
     theta = np.concatenate(([0.0], np.cumsum(2.0 * np.arctan(kbar / 2.0))))
     x = np.zeros((lbar.size + 1, 2))
     x[1:, 0] = np.cumsum(lbar * np.cos(theta))
@@ -165,7 +163,11 @@ class Simulator:
         if arrays is None:
             arrays = allocate_arrays(N)
         elif not isinstance(arrays, SimArrays) or arrays.q.shape != (2 * N,):
-            got = f"SimArrays with q of shape {arrays.q.shape}" if isinstance(arrays, SimArrays) else type(arrays).__name__
+            got = (
+                f"SimArrays with q of shape {arrays.q.shape}"
+                if isinstance(arrays, SimArrays)
+                else type(arrays).__name__
+            )
             raise ValueError(
                 f"arrays is {got}: need the SimArrays of one robot of N = {N} nodes, q of shape "
                 f"({2 * N},) (allocate_arrays({N}), or .row(i) of a batch's)"
@@ -213,8 +215,9 @@ class Simulator:
         self.arrays.kbar[:] = 0.0
         self.arrays.lbar[:] = rod.edge_length
         if x is None:
-            x = body_from_curvature(self.arrays.kbar if kbar is None else kbar,
-                                    self.arrays.lbar if lbar is None else lbar)
+            x = body_from_curvature(
+                self.arrays.kbar if kbar is None else kbar, self.arrays.lbar if lbar is None else lbar
+            )
         self.arrays.q[:] = 0.0
         self.arrays.v[:] = 0.0
         self.arrays.out[:] = 0.0
@@ -409,7 +412,9 @@ class Simulator:
         the consistent added mass. Work of :meth:`set_external_force` forces is not counted
         (it shows up in ``error``).
         """
-        return dict(zip(L.LEDGER_KEYS, self.arrays.out[L.O_LEDGER : L.O_LEDGER + L.N_LEDGER].tolist(), strict=True))
+        return dict(
+            zip(L.LEDGER_KEYS, self.arrays.out[L.O_LEDGER : L.O_LEDGER + L.N_LEDGER].tolist(), strict=True)
+        )
 
     def elastic_forces(self) -> np.ndarray:
         """Elastic plus damping forces on the nodes, (N, 2) [N]."""

@@ -217,8 +217,11 @@ def _update_contacts(v, buf, ibuf, prm, dt, n):
     state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
     stuck_any = False
     for i in range(n // 2):
-        if (state[i] == SLIDING and switches[i] < MAX_SWITCHES
-                and classify_contact(v, state, i, prm[P_VTOL], False)):
+        if (
+            state[i] == SLIDING
+            and switches[i] < MAX_SWITCHES
+            and classify_contact(v, state, i, prm[P_VTOL], False)
+        ):
             switches[i] += 1
             stuck_any = True
     if stuck_any:
@@ -372,9 +375,16 @@ def ledger_energies(s):
     # the ledger since O_L0_*: actuator work = dissipation + energy changes + error
     work = out[O_W_ACT] - out[O_L0_W_ACT]
     error = work
-    for k, (now, start) in enumerate(((O_E_FLUID, O_L0_E_FLUID), (O_E_DAMP, O_L0_E_DAMP),
-                                      (O_E_FRICTION, O_L0_E_FRICTION), (O_E_KIN, O_L0_KIN),
-                                      (O_E_ELASTIC, O_L0_ELASTIC), (O_T_FLUID, O_L0_T_FLUID))):
+    for k, (now, start) in enumerate(
+        (
+            (O_E_FLUID, O_L0_E_FLUID),
+            (O_E_DAMP, O_L0_E_DAMP),
+            (O_E_FRICTION, O_L0_E_FRICTION),
+            (O_E_KIN, O_L0_KIN),
+            (O_E_ELASTIC, O_L0_ELASTIC),
+            (O_T_FLUID, O_L0_T_FLUID),
+        )
+    ):
         term = out[now] - out[start]
         out[O_LEDGER + 1 + k] = term
         error -= term

@@ -49,6 +49,7 @@ BASELINES: dict[str, type[BaselinePolicy]] = {
     "inching-pid": InchingPID,
 }
 
+
 def parse_policy_spec(spec: str) -> tuple[str, dict[str, Any]]:
     """Split ``"name:key=value,key=value"`` into the name and a dict of parsed values.
 

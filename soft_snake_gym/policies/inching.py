@@ -80,7 +80,9 @@ class InchingParams:
                     f"duty = {self.duty!r} applies to wave='pulse' only; add wave=pulse or drop duty"
                 )
             if not 0 < self.duty <= 1:
-                raise ValueError(f"duty = {self.duty!r} must be in (0, 1]: the fraction of the edges in the pulse")
+                raise ValueError(
+                    f"duty = {self.duty!r} must be in (0, 1]: the fraction of the edges in the pulse"
+                )
         if not 0 <= self.eps < 1:
             raise ValueError(f"eps = {self.eps!r} must be in [0, 1)")
         if not self.omega >= 0:
@@ -145,11 +147,15 @@ class InchingWave(BaselinePolicy):
         """``(lbar_des, lbar_dot_des)`` at times t (n_envs,), each (n_envs, N-1)."""
         p = self.params
         if p.wave == "pulse":
-            out = [pulse_wave(ti, self.n_outputs, self.l0, p.eps, p.omega, self.delta_l, self.duty, p.direction)
-                   for ti in t]
+            out = [
+                pulse_wave(ti, self.n_outputs, self.l0, p.eps, p.omega, self.delta_l, self.duty, p.direction)
+                for ti in t
+            ]
         else:
-            out = [length_wave(ti, self.n_outputs, self.l0, p.eps, p.omega, self.delta_l, p.direction)
-                   for ti in t]
+            out = [
+                length_wave(ti, self.n_outputs, self.l0, p.eps, p.omega, self.delta_l, p.direction)
+                for ti in t
+            ]
         return np.array([o[0] for o in out]), np.array([o[1] for o in out])
 
     def _control(self, obs, state):

@@ -23,8 +23,9 @@ DEFAULT_POLICIES = {
 }
 
 
-def compare(env_id: str, specs: list[str], episodes: int = 10, seed: int = 0,
-            env_kwargs: dict[str, Any] | None = None) -> dict[str, dict[str, tuple[float, float]]]:
+def compare(
+    env_id: str, specs: list[str], episodes: int = 10, seed: int = 0, env_kwargs: dict[str, Any] | None = None
+) -> dict[str, dict[str, tuple[float, float]]]:
     """Evaluate each policy spec (see :func:`soft_snake_gym.agents.make_policy`) for
     ``episodes`` episodes on seeds ``seed, seed + 1, ...``; returns spec -> metric -> (mean, std)."""
     env = make_eval_env(env_id, n_envs=1, seed=seed, env_kwargs=env_kwargs)
@@ -46,12 +47,16 @@ def format_comparison(results: dict[str, dict[str, tuple[float, float]]], title:
         cells = []
         for key, _, _ in METRICS:
             mean, std = summary.get(key, (math.nan, math.nan))
-            cells.append(f"  {'n/a':>24}" if not math.isfinite(mean) else f"  {f'{mean:.4g} ± {std:.2g}':>24}")
+            cells.append(
+                f"  {'n/a':>24}" if not math.isfinite(mean) else f"  {f'{mean:.4g} ± {std:.2g}':>24}"
+            )
         lines.append(f"{spec:<{width}}" + "".join(cells))
     return "\n".join(lines)
 
 
-def plot_comparison(results: dict[str, dict[str, tuple[float, float]]], path: str | Path, title: str = "") -> Path:
+def plot_comparison(
+    results: dict[str, dict[str, tuple[float, float]]], path: str | Path, title: str = ""
+) -> Path:
     """Bar chart (mean with std error bars) of speed, cost of transport and return."""
     labels = {k: (label, unit) for k, label, unit in METRICS}
     return plots.comparison_chart(results, [(k, *labels[k]) for k in CHART], path, title)

@@ -156,8 +156,14 @@ def _speed_rises_with_frequency(ol: dict, pid: dict) -> list[dict[str, str]]:
         if line
         else ""
     )
-    return [_finding(f"Speed rises with frequency (swimming, E_bend = {_sci(SOFT_E_BEND)} Pa)", a1 + a1p, t1 + t1p,
-                     f"speed rises in {a1}/{t1} neighbouring frequency steps open loop, {a1p}/{t1p} with PID{ex}")]
+    return [
+        _finding(
+            f"Speed rises with frequency (swimming, E_bend = {_sci(SOFT_E_BEND)} Pa)",
+            a1 + a1p,
+            t1 + t1p,
+            f"speed rises in {a1}/{t1} neighbouring frequency steps open loop, {a1p}/{t1p} with PID{ex}",
+        )
+    ]
 
 
 def _speed_peaks_inside(ol: dict) -> list[dict[str, str]]:
@@ -171,9 +177,16 @@ def _speed_peaks_inside(ol: dict) -> list[dict[str, str]]:
         i = int(np.argmax([v for _, v in line]))
         inner += 0 < i < len(line) - 1
         peaks.append(f"{w:.2f}: {line[i][0]:.2f}")
-    return [_finding("At fixed frequency, speed peaks at an intermediate amplitude (open loop)", inner, total,
-                     f"interior peak at {inner}/{total} frequencies; peak amplitude by omega [rad/s]: alpha [rad] = "
-                     + ", ".join(peaks) + " (cells that self-intersect are excluded)")]
+    return [
+        _finding(
+            "At fixed frequency, speed peaks at an intermediate amplitude (open loop)",
+            inner,
+            total,
+            f"interior peak at {inner}/{total} frequencies; peak amplitude by omega [rad/s]: alpha [rad] = "
+            + ", ".join(peaks)
+            + " (cells that self-intersect are excluded)",
+        )
+    ]
 
 
 def _power_rises(pw: dict) -> list[dict[str, str]]:
@@ -186,8 +199,14 @@ def _power_rises(pw: dict) -> list[dict[str, str]]:
         if pw
         else ""
     )
-    return [_finding("Fluid power rises with amplitude and with frequency (open loop)", aa + aw, ta + tw,
-                     f"rises in {aa}/{ta} amplitude steps and {aw}/{tw} frequency steps{rng}")]
+    return [
+        _finding(
+            "Fluid power rises with amplitude and with frequency (open loop)",
+            aa + aw,
+            ta + tw,
+            f"rises in {aa}/{ta} amplitude steps and {aw}/{tw} frequency steps{rng}",
+        )
+    ]
 
 
 def _stiffer_is_faster(stiff: list[dict]) -> list[dict[str, str]]:
@@ -211,8 +230,14 @@ def _stiffer_is_faster(stiff: list[dict]) -> list[dict[str, str]]:
     for e in es:
         common = [r["average_speed"] for r in s if r["E_bend"] == e]
         means.append(f"{e:.3g} Pa: median {np.median(common):.4f} m/s" if common else f"{e:.3g} Pa: -")
-    return [_finding("Stiffer bodies swim faster open loop", agree, total,
-                     f"speed rises with E_bend in {agree}/{total} stiffness steps at equal gait; " + "; ".join(means))]
+    return [
+        _finding(
+            "Stiffer bodies swim faster open loop",
+            agree,
+            total,
+            f"speed rises with E_bend in {agree}/{total} stiffness steps at equal gait; " + "; ".join(means),
+        )
+    ]
 
 
 def _feedback_in_water(g: list[dict], ol: dict, pid: dict, p_ol: dict) -> list[dict[str, str]]:
@@ -231,12 +256,24 @@ def _feedback_in_water(g: list[dict], ol: dict, pid: dict, p_ol: dict) -> list[d
     eratio = np.median([err_pid[k] / err_ol[k] for k in both]) if both else math.nan
     n = len(both)
     return [
-        _finding("Feedback (PID) swims faster than open loop at low stiffness", faster, n,
-                 f"PID faster in {faster}/{n} cells, median speed ratio PID/open loop {ratio:.2f}"),
-        _finding("Feedback has a lower curvature error than open loop at low stiffness", lower_err, n,
-                 f"PID error lower in {lower_err}/{n} cells, median error ratio PID/open loop {eratio:.2f}"),
-        _finding("Feedback costs more energy", costlier, n,
-                 f"PID fluid power higher in {costlier}/{n} cells, actuator energy higher in {act_costlier}/{n}"),
+        _finding(
+            "Feedback (PID) swims faster than open loop at low stiffness",
+            faster,
+            n,
+            f"PID faster in {faster}/{n} cells, median speed ratio PID/open loop {ratio:.2f}",
+        ),
+        _finding(
+            "Feedback has a lower curvature error than open loop at low stiffness",
+            lower_err,
+            n,
+            f"PID error lower in {lower_err}/{n} cells, median error ratio PID/open loop {eratio:.2f}",
+        ),
+        _finding(
+            "Feedback costs more energy",
+            costlier,
+            n,
+            f"PID fluid power higher in {costlier}/{n} cells, actuator energy higher in {act_costlier}/{n}",
+        ),
     ]
 
 
@@ -261,11 +298,19 @@ def _friction(c: list[dict]) -> list[dict[str, str]]:
         else ""
     )
     return [
-        _finding("On land, more static friction goes further", agree_s, total_s,
-                 f"distance rises with mu_s in {agree_s}/{total_s} steps at fixed mu_d, "
-                 f"stays level (within {100 * LEVEL:g} %) in {ties_s}{span}"),
-        _finding("On land, less kinetic friction goes further", agree_d, total_d,
-                 f"distance falls with mu_d in {agree_d}/{total_d} steps at fixed mu_s, stays level in {ties_d}"),
+        _finding(
+            "On land, more static friction goes further",
+            agree_s,
+            total_s,
+            f"distance rises with mu_s in {agree_s}/{total_s} steps at fixed mu_d, "
+            f"stays level (within {100 * LEVEL:g} %) in {ties_s}{span}",
+        ),
+        _finding(
+            "On land, less kinetic friction goes further",
+            agree_d,
+            total_d,
+            f"distance falls with mu_d in {agree_d}/{total_d} steps at fixed mu_s, stays level in {ties_d}",
+        ),
     ]
 
 
@@ -281,10 +326,18 @@ def _feedback_on_land(c: list[dict]) -> list[dict[str, str]]:
     tot_ol = sum(d_ol[k] for k in both)
     tot_cl = sum(d_cl[k] for k in both)
     return [
-        _finding("On land, feedback goes further", further, len(both),
-                 f"closed loop further in {further}/{len(both)} cells; summed distance {tot_cl:.3f} m vs {tot_ol:.3f} m open loop"),
-        _finding("On land, feedback costs more energy", dearer, len(both),
-                 f"closed-loop friction energy higher in {dearer}/{len(both)} cells"),
+        _finding(
+            "On land, feedback goes further",
+            further,
+            len(both),
+            f"closed loop further in {further}/{len(both)} cells; summed distance {tot_cl:.3f} m vs {tot_ol:.3f} m open loop",
+        ),
+        _finding(
+            "On land, feedback costs more energy",
+            dearer,
+            len(both),
+            f"closed-loop friction energy higher in {dearer}/{len(both)} cells",
+        ),
     ]
 
 
@@ -453,14 +506,24 @@ def model_departures(grid: StudyGrid) -> dict[str, float]:
     """
     gait = SerpenoidParams()
     soft = {
-        c: run_cell({"study": "swim-gait", "controller": c, "alpha": gait.alpha, "omega": gait.omega,
-                     "E_bend": SOFT_E_BEND}, grid)["curvature_error"]
+        c: run_cell(
+            {
+                "study": "swim-gait",
+                "controller": c,
+                "alpha": gait.alpha,
+                "omega": gait.omega,
+                "E_bend": SOFT_E_BEND,
+            },
+            grid,
+        )["curvature_error"]
         for c in ("open-loop", "pid")
     }
     stiff = {}
     for spec in ("open-loop", "pid"):
         env = make_eval_env("SoftEel-v0", seed=0)
-        stiff[spec] = summarize(evaluate(make_policy(spec, env), env, episodes=3, transient=2.0))["curvature_error"][0]
+        stiff[spec] = summarize(evaluate(make_policy(spec, env), env, episodes=3, transient=2.0))[
+            "curvature_error"
+        ][0]
         env.close()
     kwargs = {"reset_noise_scale": 0.0}
     kwargs["max_episode_steps"] = int(round(grid.inch_duration / control_step("SoftWorm-v0", kwargs)))
@@ -468,7 +531,9 @@ def model_departures(grid: StudyGrid) -> dict[str, float]:
     sine = evaluate(make_policy("inching:wave=sine", env), env, episodes=1, transient=0.0)[0]["distance"]
     env.close()
     spec = "decentralized:" + ",".join(f"{k}={getattr(PIDParams(), k)!r}" for k in ("Kp", "Kd", "Ki"))
-    chain = rollout("SoftEel-v0", spec, 6.0, env_kwargs={"reset_noise_scale": 0.0}, reset_options=rest_start_options())
+    chain = rollout(
+        "SoftEel-v0", spec, 6.0, env_kwargs={"reset_noise_scale": 0.0}, reset_options=rest_start_options()
+    )
     return {
         "soft_error_open_loop": soft["open-loop"],
         "soft_error_pid": soft["pid"],
@@ -511,8 +576,11 @@ def _parameters(grid: StudyGrid) -> dict[str, str]:
         "inch_duration": f"{grid.inch_duration:g}",
         "pid_gains": _gains(PIDParams()),
         "decentralized_gains": _gains(DecentralizedParams()),
-        "comparison_gains": (_gains(centralized) if _gains(centralized) == _gains(DecentralizedParams())
-                             else f"{_gains(centralized)} and {_gains(DecentralizedParams())}"),
+        "comparison_gains": (
+            _gains(centralized)
+            if _gains(centralized) == _gains(DecentralizedParams())
+            else f"{_gains(centralized)} and {_gains(DecentralizedParams())}"
+        ),
         "n_nodes": f"{rod.N}",
         "transient_cycles": f"{grid.transient_cycles}",
         "cycles": f"{grid.cycles}",
@@ -520,7 +588,9 @@ def _parameters(grid: StudyGrid) -> dict[str, str]:
         "rest_gain": f"{OpenLoopParams().rest_gain:g}",
         "inch_eps": f"{inch.eps:g}",
         "inch_omega": _pi_text(inch.omega),
-        "inch_delta_l": _pi_text(inch.delta_l if inch.delta_l is not None else 2 * math.pi / (rod.N - 1), " / "),
+        "inch_delta_l": _pi_text(
+            inch.delta_l if inch.delta_l is not None else 2 * math.pi / (rod.N - 1), " / "
+        ),
         "inch_Kp": f"{inch.Kp:g}",
         "settled_after": f"{SETTLED_AFTER:g}",
     }
@@ -534,22 +604,34 @@ def _figures(rel: Path, grid: StudyGrid) -> dict[str, str]:
 
     t = f"{grid.inch_duration:g}"
     return {
-        "fig_gait_speed": fig("swim-gait_average_speed.png",
-                              f"Average speed, open loop (left) and PID {_gains(SOFT_GAINS)} (right)"),
+        "fig_gait_speed": fig(
+            "swim-gait_average_speed.png",
+            f"Average speed, open loop (left) and PID {_gains(SOFT_GAINS)} (right)",
+        ),
         "fig_gait_error": fig("swim-gait_curvature_error.png", "Mean curvature error |kappa_des - kappa|"),
         "fig_gait_power": fig("swim-gait_mean_fluid_power.png", "Mean power lost to the fluid"),
-        "fig_stiff_speed": fig("swim-stiffness_average_speed.png",
-                               f"Open-loop average speed at {_count(len(grid.e_bend))} bending moduli"),
-        "fig_stiff_power": fig("swim-stiffness_mean_fluid_power.png",
-                               f"Open-loop fluid power at {_count(len(grid.e_bend))} bending moduli"),
-        "fig_inch_distance": fig("inch-friction_distance.png",
-                                 f"Distance in {t} s, open loop (left) and closed loop (right)"),
+        "fig_stiff_speed": fig(
+            "swim-stiffness_average_speed.png",
+            f"Open-loop average speed at {_count(len(grid.e_bend))} bending moduli",
+        ),
+        "fig_stiff_power": fig(
+            "swim-stiffness_mean_fluid_power.png",
+            f"Open-loop fluid power at {_count(len(grid.e_bend))} bending moduli",
+        ),
+        "fig_inch_distance": fig(
+            "inch-friction_distance.png", f"Distance in {t} s, open loop (left) and closed loop (right)"
+        ),
         "fig_inch_energy": fig("inch-friction_energy_friction.png", f"Energy lost to friction in {t} s"),
         "fig_inch_length": fig("inch-friction_length_error.png", "Mean edge-length error |lbar_des - |e||"),
-        "fig_snapshots": fig("swim_snapshots.png", "Swimming snapshots over one gait cycle (PID, thesis gait, "
-                             "default stiffness), coloured by time, with head, tail and centre-of-mass traces"),
-        "fig_comparison": fig("centralized_vs_decentralized.png",
-                              "Centralized vs decentralized PID from rest with curvature equal to the desired one"),
+        "fig_snapshots": fig(
+            "swim_snapshots.png",
+            "Swimming snapshots over one gait cycle (PID, thesis gait, "
+            "default stiffness), coloured by time, with head, tail and centre-of-mass traces",
+        ),
+        "fig_comparison": fig(
+            "centralized_vs_decentralized.png",
+            "Centralized vs decentralized PID from rest with curvature equal to the desired one",
+        ),
     }
 
 
@@ -599,8 +681,11 @@ def write_report(path: Path, img: Path, facts: list[dict[str, str]], extras: dic
         "mu_d_list": land["mu_d_list"],
         "sine_distance_mm": number(1000 * dep["sine_distance"] if "sine_distance" in dep else None, ".0f"),
         "cores": f"{os.cpu_count() or 1}",
-        "workers": (f"{extras['workers']} worker process{'es' if extras['workers'] != 1 else ''}"
-                    if "workers" in extras else "n/a worker processes"),
+        "workers": (
+            f"{extras['workers']} worker process{'es' if extras['workers'] != 1 else ''}"
+            if "workers" in extras
+            else "n/a worker processes"
+        ),
         "timings": "\n".join(
             f"| {k} | {v['cells']} | {v['cpu']:.0f} | {v['computed']} | {v['seconds']:.0f} |"
             for k, v in extras["sweeps"].items()

@@ -84,8 +84,11 @@ class StudyGrid:
     inch_transient: float = 1.0
 
     def alphas(self) -> np.ndarray:
-        hi = (ALPHA_MAX_FRACTION * max_serpenoid_amplitude(10, math.pi / 4) if self.alpha_max is None
-              else self.alpha_max)
+        hi = (
+            ALPHA_MAX_FRACTION * max_serpenoid_amplitude(10, math.pi / 4)
+            if self.alpha_max is None
+            else self.alpha_max
+        )
         return np.round(np.linspace(self.alpha_min, hi, self.n_alpha), 4)
 
     def omegas(self) -> np.ndarray:

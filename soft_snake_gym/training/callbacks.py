@@ -70,8 +70,9 @@ def make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start:
             if self.baseline is None and self.baseline_policy is not None:
                 self.baseline = self._score(self.baseline_policy)
             vn = self.model.get_vec_normalize_env()
-            agent = TrainedPolicy(self.model, vn.obs_rms if vn is not None else None,
-                                  vn.clip_obs if vn is not None else 10.0)
+            agent = TrainedPolicy(
+                self.model, vn.obs_rms if vn is not None else None, vn.clip_obs if vn is not None else 10.0
+            )
             scores = self._score(agent)
             row = {"timesteps": self.num_timesteps, "wall_s": round(time.time() - started, 1)}
             for key in CURVE_METRICS:
@@ -99,4 +100,3 @@ def make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start:
                 self._on_step()
 
     return CallbackList([Checkpoint(), BaselineEval()])
-

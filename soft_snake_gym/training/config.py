@@ -87,8 +87,15 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.algo not in ALGOS:
             raise ConfigError(f"algo = {self.algo!r} is not supported; use one of {', '.join(ALGOS)}")
-        for name, lo in (("n_envs", 1), ("n_timesteps", 1), ("eval_episodes", 1), ("eval_freq", 0),
-                         ("checkpoint_freq", 0), ("seed", 0), ("eval_seed", 0)):
+        for name, lo in (
+            ("n_envs", 1),
+            ("n_timesteps", 1),
+            ("eval_episodes", 1),
+            ("eval_freq", 0),
+            ("checkpoint_freq", 0),
+            ("seed", 0),
+            ("eval_seed", 0),
+        ):
             value = plain_number(getattr(self, name), integer=True)
             if value is None or value < lo:
                 raise ConfigError(f"{name} = {getattr(self, name)!r} must be an integer >= {lo}")
@@ -99,7 +106,9 @@ class TrainConfig:
             raise ConfigError(f"normalize = {self.normalize!r} must be true or false")
         act = self.policy_kwargs.get("activation_fn")
         if act is not None and act not in ACTIVATIONS:
-            raise ConfigError(f"policy_kwargs.activation_fn = {act!r} must be one of {', '.join(ACTIVATIONS)}")
+            raise ConfigError(
+                f"policy_kwargs.activation_fn = {act!r} must be one of {', '.join(ACTIVATIONS)}"
+            )
         _check_hyperparams(self.algo, self.hyperparams)
 
     @property
@@ -162,8 +171,17 @@ def _check_range(key: str, value: Any) -> None:
 
 def _check_hyperparams(algo: str, hyper: dict[str, Any]) -> None:
     params = inspect.signature(_algo_class(algo).__init__).parameters
-    reserved = {"self", "policy", "env", "policy_kwargs", "seed", "tensorboard_log", "verbose",
-                "_init_setup_model", "device"}
+    reserved = {
+        "self",
+        "policy",
+        "env",
+        "policy_kwargs",
+        "seed",
+        "tensorboard_log",
+        "verbose",
+        "_init_setup_model",
+        "device",
+    }
     valid = sorted(set(params) - reserved)
     for key, value in hyper.items():
         if key not in valid:
@@ -177,7 +195,9 @@ def _check_hyperparams(algo: str, hyper: dict[str, Any]) -> None:
             )
         if key in HYPER_RANGES:
             _check_range(key, value)
-        elif key == "gradient_steps" and (plain_number(value, integer=True) is None or value == 0 or value < -1):
+        elif key == "gradient_steps" and (
+            plain_number(value, integer=True) is None or value == 0 or value < -1
+        ):
             raise ConfigError(
                 f"hyperparameter gradient_steps = {value!r} must be an integer >= 1, or -1 (as many as "
                 "steps collected)"
@@ -195,8 +215,9 @@ def _deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def load_train_config(env_id: str, algo: str = "PPO", path: str | Path | None = None,
-                      overrides: dict[str, Any] | None = None) -> TrainConfig:
+def load_train_config(
+    env_id: str, algo: str = "PPO", path: str | Path | None = None, overrides: dict[str, Any] | None = None
+) -> TrainConfig:
     """The run configuration for ``env_id`` from a zoo-style YAML file and overrides.
 
     Args:
@@ -226,7 +247,6 @@ def load_train_config(env_id: str, algo: str = "PPO", path: str | Path | None = 
     return TrainConfig(env_id=env_id, hyperparams=hyper, **run)
 
 
-
 def check_env_id(env_id: str) -> None:
     """Raise ``ConfigError`` unless ``env_id`` is a registered Gymnasium id."""
     register_envs()
@@ -234,7 +254,9 @@ def check_env_id(env_id: str) -> None:
         ours = [k for k in gym.registry if k.startswith("Soft")]
         close = difflib.get_close_matches(env_id, list(gym.registry), n=1)
         hint = f"; did you mean {close[0]!r}?" if close else ""
-        raise ConfigError(f"environment id {env_id!r} does not exist{hint} (this package has {', '.join(ours)})")
+        raise ConfigError(
+            f"environment id {env_id!r} does not exist{hint} (this package has {', '.join(ours)})"
+        )
 
 
 def steps_per_iteration(cfg: TrainConfig) -> int:
@@ -254,4 +276,3 @@ def planned_steps(cfg: TrainConfig, start: int = 0) -> int:
     chunk = steps_per_iteration(cfg)
     remaining = cfg.n_timesteps - start
     return start + (-(-remaining // chunk) * chunk if remaining > 0 else 0)
-

@@ -51,6 +51,7 @@ __all__ = [
     "save_checkpoint",
 ]
 
+
 @contextlib.contextmanager
 def _signals_held():
     """Ctrl-C and SIGTERM wait until the block ends (a save is never cut in half); on
@@ -134,10 +135,16 @@ def _git_commit(package_dir: Path | None = None) -> str:
     if it tracks the package itself, not merely encloses it (a venv inside another repo)."""
     where = package_dir or Path(__file__).resolve().parents[1]
     try:
-        tracked = subprocess.run(["git", "ls-files", "--error-unmatch", "__init__.py"], cwd=where,
-                                 capture_output=True, text=True, timeout=5)
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=where, capture_output=True, text=True,
-                              timeout=5)
+        tracked = subprocess.run(
+            ["git", "ls-files", "--error-unmatch", "__init__.py"],
+            cwd=where,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
+        head = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=where, capture_output=True, text=True, timeout=5
+        )
     except (OSError, subprocess.SubprocessError):
         return NO_CHECKOUT
     if tracked.returncode != 0 or head.returncode != 0 or not head.stdout.strip():
@@ -173,9 +180,20 @@ def _record_resume(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -
 
 
 #: The files a run writes: a folder holding only these and no checkpoint may be reused.
-RUN_FILES = ("config.yaml", "command.txt", "meta.json", "tb", "progress.csv", "learning_curve.csv",
-             "learning_curve.png", "checkpoints", "best_model.zip", "best_vecnormalize.pkl",
-             "final_model.zip", "vecnormalize.pkl")
+RUN_FILES = (
+    "config.yaml",
+    "command.txt",
+    "meta.json",
+    "tb",
+    "progress.csv",
+    "learning_curve.csv",
+    "learning_curve.png",
+    "checkpoints",
+    "best_model.zip",
+    "best_vecnormalize.pkl",
+    "final_model.zip",
+    "vecnormalize.pkl",
+)
 
 
 def _check_new_run_dir(run_dir: Path) -> None:
@@ -190,8 +208,11 @@ def _check_new_run_dir(run_dir: Path) -> None:
             f"run folder {str(run_dir)!r} already holds a run with checkpoints; "
             "pass --resume to continue it or choose another --run-dir"
         )
-    other = sorted(p.name for p in run_dir.iterdir()
-                   if p.name not in RUN_FILES and not (p.name.startswith(("config.", "progress."))))
+    other = sorted(
+        p.name
+        for p in run_dir.iterdir()
+        if p.name not in RUN_FILES and not (p.name.startswith(("config.", "progress.")))
+    )
     if other:
         raise ConfigError(
             f"run folder {str(run_dir)!r} is not empty and not a run folder (it holds {', '.join(other[:3])}"
@@ -241,8 +262,9 @@ def _make_logger(run_dir: Path):
         while (run_dir / f"progress.{k}.csv").exists():
             k += 1
         csv_path.rename(run_dir / f"progress.{k}.csv")
-    return Logger(str(run_dir), [CSVOutputFormat(str(csv_path)), TensorBoardOutputFormat(str(run_dir / "tb"))])
-
+    return Logger(
+        str(run_dir), [CSVOutputFormat(str(csv_path)), TensorBoardOutputFormat(str(run_dir / "tb"))]
+    )
 
 
 def plot_learning_curve(run_dir: str | Path, out: str | Path | None = None) -> Path:

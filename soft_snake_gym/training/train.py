@@ -36,8 +36,9 @@ def make_train_env(cfg: TrainConfig, seed: int):
 
         return SoftVecEnv(cfg.env_id, n_envs=cfg.n_envs, seed=seed, **dict(cfg.env_kwargs))
     cls = SubprocVecEnv if cfg.vec_env == "subproc" else DummyVecEnv
-    return make_vec_env(cfg.env_id, n_envs=cfg.n_envs, seed=seed, env_kwargs=dict(cfg.env_kwargs),
-                        vec_env_cls=cls)
+    return make_vec_env(
+        cfg.env_id, n_envs=cfg.n_envs, seed=seed, env_kwargs=dict(cfg.env_kwargs), vec_env_cls=cls
+    )
 
 
 def _policy_kwargs(cfg: TrainConfig) -> dict[str, Any]:
@@ -46,15 +47,24 @@ def _policy_kwargs(cfg: TrainConfig) -> dict[str, Any]:
     kwargs = dict(cfg.policy_kwargs)
     act = kwargs.pop("activation_fn", None)
     if act is not None:
-        kwargs["activation_fn"] = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU,
-                                   "leaky_relu": nn.LeakyReLU}[act]
+        kwargs["activation_fn"] = {
+            "tanh": nn.Tanh,
+            "relu": nn.ReLU,
+            "elu": nn.ELU,
+            "leaky_relu": nn.LeakyReLU,
+        }[act]
     if "net_arch" in kwargs and isinstance(kwargs["net_arch"], dict):
         kwargs["net_arch"] = {k: list(v) for k, v in kwargs["net_arch"].items()}
     return kwargs
 
 
-def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress: bool = True,
-          command: list[str] | None = None) -> Path:
+def train(
+    cfg: TrainConfig,
+    run_dir: str | Path,
+    resume: bool = False,
+    progress: bool = True,
+    command: list[str] | None = None,
+) -> Path:
     """Train (or, with ``resume``, continue) a run in ``run_dir``; returns the final model path.
 
     Everything is checked (env keywords, hyperparameters, the baseline, the folder) before the
@@ -98,8 +108,15 @@ def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress:
         if cfg.normalize:
             env = VecNormalize(env, gamma=cfg.hyperparams.get("gamma", 0.99))
         try:
-            model = algo(cfg.policy, env, policy_kwargs=_policy_kwargs(cfg), seed=cfg.seed, device="cpu",
-                         verbose=0, **cfg.hyperparams)
+            model = algo(
+                cfg.policy,
+                env,
+                policy_kwargs=_policy_kwargs(cfg),
+                seed=cfg.seed,
+                device="cpu",
+                verbose=0,
+                **cfg.hyperparams,
+            )
         except (TypeError, ValueError, AssertionError) as err:
             env.close()
             raise ConfigError(f"{cfg.algo} rejected the configuration: {err}") from None
@@ -116,8 +133,9 @@ def train(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress:
         with _sigterm_as_interrupt():
             try:
                 if steps > 0:
-                    model.learn(steps, callback=callbacks, reset_num_timesteps=not resume,
-                                progress_bar=progress)
+                    model.learn(
+                        steps, callback=callbacks, reset_num_timesteps=not resume, progress_bar=progress
+                    )
             except KeyboardInterrupt:
                 save_checkpoint(model, run_dir, started)
                 raise
