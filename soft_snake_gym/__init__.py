@@ -1,5 +1,8 @@
-"""soft_snake_gym: soft segmented robots (an eel that swims, a worm that inches) as a
-numba-compiled planar discrete elastic rod, with Gymnasium environments on top."""
+"""soft_snake_gym.
+
+Soft segmented robots (an eel that swims, a worm that inches) as a numba-compiled planar discrete
+elastic rod, with Gymnasium environments on top.
+"""
 
 from soft_snake_gym.envs import InchEnv, SwimEnv, register_envs
 from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig

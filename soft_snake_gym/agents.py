@@ -102,9 +102,9 @@ def load_model(path: str | Path, env: Any) -> Any:
 
 
 class TrainedPolicy:
-    """A trained SB3 model with its ``VecNormalize`` observation statistics, behaving like
-    the baselines: ``predict`` takes raw observations, so it runs through the same
-    evaluation as any controller.
+    """A trained SB3 model with its ``VecNormalize`` observation statistics, behaving like the baselines.
+
+    ``predict`` takes raw observations, so it runs through the same evaluation as any controller.
 
     Args:
         model: the SB3 model.

@@ -106,7 +106,8 @@ class _VectorCase:
 
 def _gait_actions(robots: int, n: int = 8, steps: int = 300) -> np.ndarray:
     """The thesis serpenoid (alpha = pi/6, omega = 2 pi/3) as normalized SoftEel-v0 actions
-    of ``robots`` eels of ``n + 2`` nodes, (steps, robots, n) float32."""
+    of ``robots`` eels of ``n + 2`` nodes, (steps, robots, n) float32.
+    """
     alpha, omega = (math.pi / 6) * 8 / n, 2 * math.pi / 3  # the same body shape at any n
     t = (np.arange(steps) + 0.5) * 0.01
     rates = np.array([serpenoid(serpenoid_phase(ti, n, omega, 2 * math.pi / n), omega, alpha)[1] for ti in t])
@@ -114,8 +115,7 @@ def _gait_actions(robots: int, n: int = 8, steps: int = 300) -> np.ndarray:
 
 
 def _kernel_share(case: _VectorCase, seconds: float) -> float:
-    """Fraction of a batched env's step time spent in the compiled call (the rest: Python,
-    autoresets, infos)."""
+    """Fraction of a batched env's step time spent in the compiled call (the rest: Python, autoresets, infos)."""
     venv = case.env
     venv.kernel_seconds = 0.0
     start = time.perf_counter()
@@ -156,7 +156,8 @@ def _ppo_settings(env_id: str) -> tuple[int, dict[str, Any], dict[str, Any]]:
 
 def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict[str, Any]:
     """``model.learn`` environment steps per second with the batched env or ``SubprocVecEnv``
-    (after one warm-up rollout and update), at the package's PPO settings for ``env_id``."""
+    (after one warm-up rollout and update), at the package's PPO settings for ``env_id``.
+    """
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env

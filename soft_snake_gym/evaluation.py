@@ -1,6 +1,7 @@
-"""The one metrics module: run episodes of any policy through SB3's ``evaluate_policy`` and
-collect per-episode metrics (docs/model.md §8), named, labelled and given units once in the
-registry :data:`METRICS`.
+"""The one metrics module.
+
+Run episodes of any policy through SB3's ``evaluate_policy`` and collect per-episode metrics
+(docs/model.md §8), named, labelled and given units once in the registry :data:`METRICS`.
 
 Per episode:
 
@@ -344,9 +345,11 @@ def evaluate(
 
 
 def check_video_path(path: str | Path) -> None:
-    """Raise ``ValueError`` unless a video can be written at ``path``: a ``.gif`` (Pillow), or an
-    ``.mp4`` with imageio and its ffmpeg plugin installed (the ``video`` extra). Call it before
-    running episodes, so a missing dependency fails at once."""
+    """Raise ``ValueError`` unless a video can be written at ``path``.
+
+    A ``.gif`` (Pillow), or an ``.mp4`` with imageio and its ffmpeg plugin installed (the ``video``
+    extra). Call it before running episodes, so a missing dependency fails at once.
+    """
     suffix = Path(path).suffix.lower()
     if suffix not in (".mp4", ".gif"):
         raise ValueError(f"video path {str(path)!r} must end in .mp4 or .gif")
@@ -364,7 +367,8 @@ def check_video_path(path: str | Path) -> None:
 def check_transient(transient: float, duration: float) -> None:
     """Raise ``ValueError`` unless ``transient`` [s] leaves an averaging window in an episode of
     ``duration`` [s]: speed and error are averaged after the transient only when the episode
-    lasts at least twice as long (otherwise over the whole episode)."""
+    lasts at least twice as long (otherwise over the whole episode).
+    """
     if not (isinstance(transient, (int, float)) and math.isfinite(transient) and transient >= 0):
         raise ValueError(f"transient = {transient!r} s must be a finite number >= 0")
     if 2 * transient > duration + 1e-9:
@@ -377,7 +381,8 @@ def check_transient(transient: float, duration: float) -> None:
 def gait_rate_warning(policy: Any, env: Any) -> str | None:
     """A warning if a baseline's gait asks for input rates beyond the env's action scale
     (``max_curvature_rate`` or ``max_length_rate``): the actions saturate and the gait is not
-    the one named. None when the gait fits or the policy has no gait (a trained agent)."""
+    the one named. None when the gait fits or the policy has no gait (a trained agent).
+    """
     params = getattr(policy, "params", None)
     inner = env.envs[0].unwrapped if hasattr(env, "envs") else getattr(env, "unwrapped", env)
     omega = getattr(params, "omega", None)

@@ -1,5 +1,6 @@
-"""Traveling-wave gaits (docs/model.md §6): the serpenoid for swimming, the length waves (sinusoidal
-and peristaltic pulse) for inching.
+"""Traveling-wave gaits (docs/model.md §6).
+
+The serpenoid for swimming, the length waves (sinusoidal and peristaltic pulse) for inching.
 
 All functions are plain numpy on arrays, so policies and tests share them.
 """
@@ -108,7 +109,8 @@ def serpenoid(
 
 def max_serpenoid_amplitude(n_nodes: int, delta: float, gamma: float = 0.0) -> float:
     """Largest ``alpha`` (bisection, 1e-4 rad) whose serpenoid body with equal edges does not
-    self-intersect at any phase (docs/model.md §6)."""
+    self-intersect at any phase (docs/model.md §6).
+    """
     lbar = np.ones(n_nodes - 1)
 
     def crosses(alpha: float) -> bool:
@@ -154,8 +156,10 @@ def pulse_wave(
     duty: float,
     direction: int = 1,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Peristaltic pulse of the rest lengths (docs/model.md §6): a raised-cosine compression pulse
-    that occupies a fraction ``duty`` of each period, the rest of the time at ``l0``.
+    """Peristaltic pulse of the rest lengths (docs/model.md §6).
+
+    A raised-cosine compression pulse that occupies a fraction ``duty`` of each period, the rest of
+    the time at ``l0``.
 
     With the phase ``theta_k = (omega t - direction delta_l k) mod 2 pi`` and
     ``w = 2 pi duty``::

@@ -50,9 +50,12 @@ def check_number(
     lo_open: bool = False,
     hi_open: bool = False,
 ) -> int | float:
-    """The one validator of a real number: ``value`` as a Python number if it is a finite number
-    within [lo, hi] (open ends with ``lo_open``/``hi_open``; ``None``: unbounded), else
-    ``ValueError`` naming ``where`` (e.g. ``"Rod.E"``), the value and the allowed range."""
+    """The one validator of a real number.
+
+    ``value`` as a Python number if it is a finite number within [lo, hi] (open ends with
+    ``lo_open``/``hi_open``; ``None``: unbounded), else ``ValueError`` naming ``where`` (e.g.
+    ``"Rod.E"``), the value and the allowed range.
+    """
     left = "(" if lo_open or lo is None else "["
     right = ")" if hi_open or hi is None else "]"
     allowed = f"{left}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{right}"
@@ -87,9 +90,12 @@ def _check(
 
 
 def check_int(where: str, value: Any, lo: int, hi: int | None = None, hint: str = "") -> int:
-    """:func:`check_number` for integers: ``value`` as a Python ``int`` if it is an integer
-    (Python or numpy, not a bool) in [lo, hi], else ``ValueError`` naming ``where``, the value,
-    the allowed range and, if given, ``hint`` (what the number means or what else is allowed)."""
+    """:func:`check_number` for integers.
+
+    ``value`` as a Python ``int`` if it is an integer (Python or numpy, not a bool) in [lo, hi],
+    else ``ValueError`` naming ``where``, the value, the allowed range and, if given, ``hint`` (what
+    the number means or what else is allowed).
+    """
     number = plain_number(value, integer=True)
     if number is None or number < lo or (hi is not None and number > hi):
         allowed = f"[{lo}, {'inf' if hi is None else hi}]"
@@ -204,8 +210,10 @@ class Rod:
                 object.__setattr__(self, name, value)
 
     def refined(self, N: int) -> Rod:  # noqa: N803 - docs/model.md's name
-        """The same robot (length, mass, cross-section, material) with ``N`` nodes; see the
-        class docstring. ``Rod().refined(10) == Rod()``."""
+        """The same robot (length, mass, cross-section, material) with ``N`` nodes; see the class docstring.
+
+        ``Rod().refined(10) == Rod()``.
+        """
         return dataclasses.replace(self, refine=N)
 
     @property
@@ -215,8 +223,11 @@ class Rod:
 
     @property
     def edge_ratio(self) -> float:
-        """``l / l_design``: this rod's edge length over that of the robot as designed
-        (exactly 1.0 for a rod that is not a refinement) [-]."""
+        """``l / l_design``.
+
+        This rod's edge length over that of the robot as designed (exactly 1.0 for a rod that is not
+        a refinement) [-].
+        """
         return (self.design_nodes - 1) / (self.N - 1)
 
     @property

@@ -1,6 +1,7 @@
-"""Every figure of the package: sweep heatmaps, the swimming snapshot, centralized vs
-decentralized control, the training learning curve, the comparison bar chart and the benchmark
-chart.
+"""Every figure of the package.
+
+Sweep heatmaps, the swimming snapshot, centralized vs decentralized control, the training learning
+curve, the comparison bar chart and the benchmark chart.
 
 Each function draws from numbers it is given (it runs no simulation) on its own
 :class:`matplotlib.figure.Figure` with an Agg canvas, writes a PNG and returns its path: no
@@ -61,9 +62,11 @@ _AXIS = {
 
 
 def cell_edges(values: np.ndarray) -> np.ndarray:
-    """Edges (n + 1,) of the heatmap cells of sorted grid values (n,): halfway between
-    neighbours, and at the first and last value, so the axes span the grid and no more (a
-    value on the border owns the half cell inside it). One value gets a cell of ±5 %."""
+    """Edges (n + 1,) of the heatmap cells of sorted grid values (n,).
+
+    Halfway between neighbours, and at the first and last value, so the axes span the grid and no
+    more (a value on the border owns the half cell inside it). One value gets a cell of ±5 %.
+    """
     values = np.asarray(values, dtype=float)
     if values.size == 1:
         half = 0.05 * abs(values[0]) or 0.5
@@ -73,7 +76,8 @@ def cell_edges(values: np.ndarray) -> np.ndarray:
 
 def sweep_heatmaps(study: Any, rows: list[dict[str, Any]], out_dir: str | Path) -> list[Path]:
     """One PNG per metric of ``study`` (a :class:`~soft_snake_gym.studies.sweep.Study`), one
-    panel per controller (or per bending modulus), cells annotated with their values."""
+    panel per controller (or per bending modulus), cells annotated with their values.
+    """
     out_dir = Path(out_dir)
     if not rows:
         return []
@@ -212,9 +216,10 @@ def controller_comparison(
 def learning_curve(
     rows: list[dict[str, str]], cfg: Any, metrics: Sequence[tuple[str, str, str]], out: str | Path
 ) -> Path:
-    """A run's evaluations: the agent's average speed and cost of transport (mean ± std over the
-    evaluation episodes) against environment steps, with the baseline's figures on the same
-    seeds as horizontal lines.
+    """A run's evaluations.
+
+    The agent's average speed and cost of transport (mean ± std over the evaluation episodes)
+    against environment steps, with the baseline's figures on the same seeds as horizontal lines.
 
     Args:
         rows: the rows of learning_curve.csv (text, as ``csv.DictReader`` gives them).
@@ -281,7 +286,8 @@ def comparison_chart(
 
 def benchmark_chart(res: dict[str, Any], path: str | Path) -> Path:
     """Throughput bars (log scale) and cost per robot step against N, from
-    :func:`soft_snake_gym.benchmark.run_benchmark`'s result, as a PNG."""
+    :func:`soft_snake_gym.benchmark.run_benchmark`'s result, as a PNG.
+    """
     fig = _figure(figsize=(12, 4.8))
     ax1, ax2 = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.6, 1]})
     rows = res["throughput"] + [

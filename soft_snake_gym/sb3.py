@@ -136,8 +136,11 @@ class SoftVecEnv(VecEnv):
         ]
 
     def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
-        """True for SB3's ``Monitor``: the adapter records its episode statistics itself (so
-        ``evaluate_policy`` reads ``info["episode"]``); False for any other wrapper."""
+        """True for SB3's ``Monitor``.
+
+        The adapter records its episode statistics itself (so ``evaluate_policy`` reads
+        ``info["episode"]``); False for any other wrapper.
+        """
         from stable_baselines3.common.monitor import Monitor
 
         return [wrapper_class is Monitor for _ in self._indices(indices)]

@@ -1,7 +1,8 @@
-"""Convergence in the time step (docs/model.md §5a, §10): every baseline, the shipped agents and a
-fixed seeded random-action sequence give the same episode metrics at the default integration
-step and with it divided by 4 and 16 (5 % in water, 10 % on the ground), and the
-``soft-snake convergence`` command that prints the table.
+"""Convergence in the time step (docs/model.md §5a, §10).
+
+Every baseline, the shipped agents and a fixed seeded random-action sequence give the same episode
+metrics at the default integration step and with it divided by 4 and 16 (5 % in water, 10 % on the
+ground), and the ``soft-snake convergence`` command that prints the table.
 
 The cases in :data:`KNOWN_FAILING` do not converge yet, each with the measured reason; they
 are strict ``xfail``: the day one converges, the suite says so and its entry must be removed.

@@ -1,5 +1,8 @@
-"""The repository stands alone: its documents and code refer to the model in docs/model.md,
-never to a file outside the repository, and every section they cite exists there."""
+"""The repository stands alone.
+
+Its documents and code refer to the model in docs/model.md, never to a file outside the repository,
+and every section they cite exists there.
+"""
 
 from __future__ import annotations
 

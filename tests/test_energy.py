@@ -1,5 +1,8 @@
-"""The energy checks of docs/model.md §4 and §10: the consistent added mass exchanges energy with the
-body without creating any, and the energy ledger closes to an error that shrinks with the step."""
+"""The energy checks of docs/model.md §4 and §10.
+
+The consistent added mass exchanges energy with the body without creating any, and the energy ledger
+closes to an error that shrinks with the step.
+"""
 
 from __future__ import annotations
 
@@ -17,7 +20,8 @@ NO_DRAG = {"C_f": 0.0, "C_D": 0.0}  # water that stores energy but dissipates no
 def released(added_mass: str, method: str, substeps: int | None, T: float = 1.0, spin: float = 0.0):
     """A bent body (rest shape straight) released in drag-free water, no input, no damping;
     ``spin`` [rad/s] adds a rigid rotation so that the edges turn from the start. Returns the
-    simulator and the energies body + ``T_f`` and body alone after every step."""
+    simulator and the energies body + ``T_f`` and body alone after every step.
+    """
     sim = Simulator(
         SimConfig(
             rod=Rod(damping_bend=0.0),
@@ -61,8 +65,11 @@ def test_backward_euler_never_lets_body_plus_water_energy_grow():
 
 
 def test_kelasidi_form_creates_energy_whatever_the_step():
-    """The sources' acceleration-only added mass is not conservative: released in drag-free
-    water the body + water energy rises far above its start, by the same amount at every step."""
+    """The sources' acceleration-only added mass is not conservative.
+
+    Released in drag-free water the body + water energy rises far above its start, by the same
+    amount at every step.
+    """
     rises = []
     for substeps in (40, 80):
         _, E, _ = released("kelasidi", "symplectic_euler", substeps, T=2.0)
@@ -75,7 +82,8 @@ def test_kelasidi_form_creates_energy_whatever_the_step():
 
 def _gait_ledger(substeps: int, added_mass: str = "consistent", damping: float = 0.0, T: float = 2.0):
     """The ledger of an open-loop serpenoid (alpha = pi/6, omega = 2 pi/3, delta = pi/4) from a
-    straight body at rest, backward Euler with ``substeps`` internal steps."""
+    straight body at rest, backward Euler with ``substeps`` internal steps.
+    """
     sim = Simulator(
         SimConfig(
             rod=Rod(damping_bend=damping, damping_stretch=10 * damping),
@@ -184,7 +192,8 @@ def test_consistent_form_newton_converges_in_few_iterations():
 
 def _env_ledger(substeps: int) -> dict[str, float]:
     """``info["energy"]`` after 1.5 s of the open-loop baseline from a straight body (its
-    start, which pulls the rest shape onto the gait within a few steps, is a hard transient)."""
+    start, which pulls the rest shape onto the gait within a few steps, is a hard transient).
+    """
     import gymnasium as gym
 
     import soft_snake_gym  # noqa: F401

@@ -111,8 +111,11 @@ def test_a_pulse_faster_than_the_actuators_warns():
 
 
 def test_the_worm_holds_the_edges_outside_the_pulse_at_rest_length():
-    """Physics of the gait: under the open-loop pulse the rest lengths outside the pulse stay
-    at l0, so at most about duty (N - 1) edges change at a time, and the worm moves forward."""
+    """Physics of the gait.
+
+    Under the open-loop pulse the rest lengths outside the pulse stay at l0, so at most about duty
+    (N - 1) edges change at a time, and the worm moves forward.
+    """
     duty = 0.6  # its peak rate fits the actuators (0.28 of 0.3 m/s), so nothing is clipped
     venv = make_eval_env("SoftWorm-v0", env_kwargs={"reset_noise_scale": 0.0, "max_episode_steps": 300})
     policy = make_policy(f"inching:wave=pulse,duty={duty}", venv)

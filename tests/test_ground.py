@@ -81,9 +81,11 @@ def inch(
 
 
 def test_peristaltic_pulse_moves_the_worm_with_the_wave_and_the_sine_wave_barely():
-    """docs/model.md §6: with isotropic friction a worm moves by anchoring. The pulse changes a
-    few edges at a time and anchors the rest, so it carries the worm with the wave; the
-    sinusoidal wave changes every edge at once and anchors little."""
+    """docs/model.md §6: with isotropic friction a worm moves by anchoring.
+
+    The pulse changes a few edges at a time and anchors the rest, so it carries the worm with the
+    wave; the sinusoidal wave changes every edge at once and anchors little.
+    """
     forward, sim = inch(+1, duty=0.5)
     backward, _ = inch(-1, duty=0.5)
     sine, _ = inch(+1)
@@ -96,9 +98,11 @@ def test_peristaltic_pulse_moves_the_worm_with_the_wave_and_the_sine_wave_barely
 
 
 def test_friction_never_gives_more_than_static_friction_impulse():
-    """Internal forces cancel, so the body's momentum changes only by friction: per step at
-    most mu_s * M * g * dt, however violently the worm actuates. A node held stuck through a
-    whole step against larger forces would break this."""
+    """Internal forces cancel, so the body's momentum changes only by friction.
+
+    Per step at most mu_s * M * g * dt, however violently the worm actuates. A node held stuck
+    through a whole step against larger forces would break this.
+    """
     sim = Simulator(SimConfig(medium="ground"))
     rng = np.random.default_rng(11)
     M, h = sim.masses.sum(), sim.h
@@ -116,9 +120,11 @@ def test_friction_never_gives_more_than_static_friction_impulse():
 
 
 def test_friction_obeys_coulomb_at_the_end_of_every_step():
-    """docs/model.md §5 at the end of the step, node by node, under violent actuation: the friction
-    force ``f = m (v - v0)/h - F(q1, v1)`` holds a node at rest within ``mu_s F_N`` and is
-    ``mu_d F_N`` against the end velocity of a sliding node (to the smoothing far below V_tol)."""
+    """docs/model.md §5 at the end of the step, node by node, under violent actuation.
+
+    The friction force ``f = m (v - v0)/h - F(q1, v1)`` holds a node at rest within ``mu_s F_N`` and
+    is ``mu_d F_N`` against the end velocity of a sliding node (to the smoothing far below V_tol).
+    """
     sim = Simulator(SimConfig(medium="ground"))
     rng = np.random.default_rng(5)
     h, m = sim.h, sim.masses
@@ -165,7 +171,8 @@ def test_anisotropic_kinetic_friction_depends_on_the_sliding_direction(method, d
 def test_backward_friction_lets_a_symmetric_wave_move_the_worm_forward():
     """Setae-like anisotropy (sliding toward the tail costs more than toward the head) turns a
     wave that moves an isotropic worm almost nowhere into forward motion, whichever way the
-    wave travels."""
+    wave travels.
+    """
     iso, _ = inch(-1)
     setae = Ground(mu_forward=0.3, mu_backward=1.1)
     for direction in (1, -1):

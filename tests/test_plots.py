@@ -1,5 +1,8 @@
-"""Figures: drawn on their own Agg canvas, never through pyplot or a global backend; the
-reproduction report's template has no number typed in."""
+"""Figures.
+
+Drawn on their own Agg canvas, never through pyplot or a global backend; the reproduction report's
+template has no number typed in.
+"""
 
 from __future__ import annotations
 

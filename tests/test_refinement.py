@@ -1,5 +1,7 @@
-"""Refining one robot in space: the same eel (length, mass, cross-section, material, gait)
-with more nodes converges to one continuous body.
+"""Refining one robot in space.
+
+The same eel (length, mass, cross-section, material, gait) with more nodes converges to one
+continuous body.
 
 ``Rod.N`` alone adds edges of the same length; ``Rod.refined`` (or the key ``refine``) keeps
 the robot and shrinks the edges, scales the material damping like the stiffnesses, and the
@@ -87,7 +89,8 @@ def test_gait_mapping_is_the_identity_on_the_design_robot_and_scales_with_the_ed
 
 def test_controllers_command_the_same_wave_on_arc_length():
     """At equal arc length s and time t, the refined robot's controllers ask for the same
-    turning angle per metre (serpenoid) and the same strain (length wave) as the design's."""
+    turning angle per metre (serpenoid) and the same strain (length wave) as the design's.
+    """
     t = np.array([0.37, 1.9])
     phi = {}
     for N in (10, 19):
@@ -107,8 +110,10 @@ def test_controllers_command_the_same_wave_on_arc_length():
 
 
 def test_refined_serpenoid_start_is_the_same_body():
-    """The env's serpenoid start, at N = 10, 19, 37 (edges 1, 1/2, 1/4 of the design's):
-    node positions at the design nodes' arc lengths converge to one curve."""
+    """The env's serpenoid start, at N = 10, 19, 37 (edges 1, 1/2, 1/4 of the design's).
+
+    Node positions at the design nodes' arc lengths converge to one curve.
+    """
     shapes = {}
     for N in (10, 19, 37):
         env = gym.make("SoftEel-v0", rod={"refine": N}, initial_shape="serpenoid", reset_noise_scale=0.0)
@@ -122,9 +127,11 @@ def test_refined_serpenoid_start_is_the_same_body():
 
 @pytest.mark.parametrize("kind", ["bend", "stretch"])
 def test_refined_damping_relaxes_at_the_continuum_rate(kind):
-    """Kelvin-Voigt relaxation of a free rod (no medium, strong damping): a bend decays at
-    ``EI / (l damping_bend)`` and a stretch at ``EA / (l damping_stretch)``, rates that the
-    refinement keeps whatever N (unscaled damping would make them grow like 1/l)."""
+    """Kelvin-Voigt relaxation of a free rod (no medium, strong damping).
+
+    A bend decays at ``EI / (l damping_bend)`` and a stretch at ``EA / (l damping_stretch)``, rates
+    that the refinement keeps whatever N (unscaled damping would make them grow like 1/l).
+    """
     design = Rod(damping_bend=56.0) if kind == "bend" else Rod(damping_stretch=45_000.0)
     rate = design.EI / design.damping_bend if kind == "bend" else design.EA / design.damping_stretch
     rate /= design.edge_length
@@ -150,7 +157,8 @@ def test_refined_damping_relaxes_at_the_continuum_rate(kind):
 
 def _episode(N: int, policy, seconds: float = 6.0, window: float = 3.0) -> tuple[float, float]:
     """Speed [m/s] and mean fluid power [W] over the last ``window`` s (one gait period) of an
-    episode of the thesis robot refined to N nodes, started at rest on the gait's shape."""
+    episode of the thesis robot refined to N nodes, started at rest on the gait's shape.
+    """
     env = gym.make(
         "SoftEel-v0",
         rod={"refine": N},
@@ -174,9 +182,11 @@ def _episode(N: int, policy, seconds: float = 6.0, window: float = 3.0) -> tuple
 
 @pytest.mark.parametrize("policy", [OpenLoopSerpenoid, CurvaturePID], ids=["open-loop", "pid"])
 def test_speed_and_fluid_power_converge_as_the_robot_is_refined(policy):
-    """The thesis gait (alpha = pi/6, omega = 2 pi/3, one wave) on the same robot at N = 10,
-    20, 40: the changes in speed and fluid power shrink at least by half each time the edges
-    halve (measured: about 4x, second order)."""
+    """The thesis gait (alpha = pi/6, omega = 2 pi/3, one wave) on the same robot at N = 10, 20, 40.
+
+    The changes in speed and fluid power shrink at least by half each time the edges halve
+    (measured: about 4x, second order).
+    """
     results = {N: _episode(N, policy) for N in (10, 20, 40)}
     print(f"\n{policy.name}: " + ", ".join(f"N={N}: {s:.4f} m/s {p:.3f} W" for N, (s, p) in results.items()))
     for k, name in enumerate(("speed", "fluid power")):

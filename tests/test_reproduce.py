@@ -1,5 +1,4 @@
-"""``soft-snake reproduce``: the sources' headline case, computed by the code and written into
-the report."""
+"""``soft-snake reproduce``: the sources' headline case, computed by the code and written into the report."""
 
 from __future__ import annotations
 
@@ -15,7 +14,8 @@ from soft_snake_gym.studies.reproduce import HEADLINE_MODELS, headline_case, hea
 @pytest.fixture(scope="module")
 def short_headline(request):
     """A short headline case (one amplitude, 1 s window after a 1.5 s transient) with the
-    physics each robot ran on, recorded through the eval env factory."""
+    physics each robot ran on, recorded through the eval env factory.
+    """
     import soft_snake_gym.studies.reproduce as reproduce
 
     seen = []

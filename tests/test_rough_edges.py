@@ -1,5 +1,8 @@
-"""Input handling and messages found rough in use (issue 15): numpy scalars, wording,
-duplicate YAML keys, randomization ranges, early argument checks, documentation."""
+"""Input handling and messages found rough in use (issue 15).
+
+Numpy scalars, wording, duplicate YAML keys, randomization ranges, early argument checks,
+documentation.
+"""
 
 from __future__ import annotations
 

@@ -200,10 +200,11 @@ def test_hyperparameter_file_is_plain_yaml_keyed_by_env_id():
 
 @pytest.mark.parametrize("env_id,baseline", [("SoftEel-v0", "pid"), ("SoftWorm-v0", "inching-pid")])
 def test_shipped_agents_beat_their_baselines(env_id, baseline):
-    """The agents in soft_snake_gym/zoo do what docs/training.md says, on a seed they were not
-    selected on: the eel swims faster than the PID (at a higher cost of transport: pricing
-    energy so that it also beats the PID's is still open), the worm goes further than the
-    closed-loop peristaltic pulse."""
+    """The agents in soft_snake_gym/zoo do what docs/training.md says, on a seed they were not selected on.
+
+    The eel swims faster than the PID (at a higher cost of transport: pricing energy so that it also
+    beats the PID's is still open), the worm goes further than the closed-loop peristaltic pulse.
+    """
     from soft_snake_gym.studies.compare import compare
 
     res = compare(env_id, ["zoo:ppo", baseline], episodes=1, seed=42)

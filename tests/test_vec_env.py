@@ -1,5 +1,8 @@
-"""The batched vector env: Gymnasium's vector API, autoreset, bit-for-bit equality with the
-single env, SB3 (PPO, VecNormalize, evaluate_policy) and clear errors."""
+"""The batched vector env.
+
+Gymnasium's vector API, autoreset, bit-for-bit equality with the single env, SB3 (PPO, VecNormalize,
+evaluate_policy) and clear errors.
+"""
 
 from __future__ import annotations
 
@@ -61,9 +64,11 @@ def test_make_vec_returns_the_batched_env_with_batched_spaces(env_id):
     [(i, AutoresetMode.NEXT_STEP) for i in IDS] + [("SoftEel-v0", AutoresetMode.SAME_STEP)],
 )
 def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_id, mode):
-    """Robot i seeded s + i, with the same actions, is the single env seeded s + i: obs,
-    rewards, ends, every info entry and the episode statistics, across failures, time limits
-    and autoresets (with physics randomization drawn anew at each), in both autoreset modes."""
+    """Robot i seeded s + i, with the same actions, is the single env seeded s + i.
+
+    Obs, rewards, ends, every info entry and the episode statistics, across failures, time limits
+    and autoresets (with physics randomization drawn anew at each), in both autoreset modes.
+    """
     n, steps, kw = 4, 500 if mode == AutoresetMode.NEXT_STEP else 250, ENDS[env_id]
     batched = gym.make_vec(env_id, num_envs=n, max_episode_steps=90, autoreset_mode=mode, **kw)
     sync = RecordEpisodeStatistics(
@@ -239,7 +244,8 @@ def test_returned_arrays_are_not_the_env_buffers():
 # --- Stable-Baselines3 ---------------------------------------------------------------------------
 def test_sb3_adapter_matches_dummy_vec_env_of_single_envs():
     """SoftVecEnv is bitwise SB3's DummyVecEnv over Monitor-wrapped single envs (make_vec_env),
-    terminal observations and time-limit flags included."""
+    terminal observations and time-limit flags included.
+    """
     from stable_baselines3.common.env_util import make_vec_env
 
     from soft_snake_gym.sb3 import SoftVecEnv

@@ -1,5 +1,7 @@
-"""``soft-snake benchmark``: steps per second of the envs, the batched env and PPO, against
-MuJoCo's ``Swimmer-v5``."""
+"""``soft-snake benchmark``.
+
+Steps per second of the envs, the batched env and PPO, against MuJoCo's ``Swimmer-v5``.
+"""
 
 from __future__ import annotations
 

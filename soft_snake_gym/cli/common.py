@@ -1,5 +1,7 @@
-"""What every ``soft-snake`` command shares: the user-error type, the one-line argument parser and
-the env keywords of an episode command."""
+"""What every ``soft-snake`` command shares.
+
+The user-error type, the one-line argument parser and the env keywords of an episode command.
+"""
 
 from __future__ import annotations
 
@@ -53,8 +55,11 @@ def add_env_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def env_kwargs_from_args(args: argparse.Namespace) -> dict[str, Any]:
-    """The env keywords of an episode command: ``--env-kwarg``, ``--env-config`` and
-    ``--max-steps`` (checked) as ``make_eval_env``'s ``env_kwargs``."""
+    """The env keywords of an episode command.
+
+    ``--env-kwarg``, ``--env-config`` and ``--max-steps`` (checked) as ``make_eval_env``'s
+    ``env_kwargs``.
+    """
     # dotted keys build nested sections: rod.E_bend=1.87e4 -> {"rod": {"E_bend": ...}}
     env_kwargs = parse_assignments(
         args.env_kwarg, "--env-kwarg {item} is not key=value; write e.g. --env-kwarg dt=0.02"

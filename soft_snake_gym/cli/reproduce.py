@@ -1,5 +1,7 @@
-"""``soft-snake reproduce``: every sweep, both trajectory figures, the sources' headline case and
-docs/thesis_reproduction.md."""
+"""``soft-snake reproduce``.
+
+Every sweep, both trajectory figures, the sources' headline case and docs/thesis_reproduction.md.
+"""
 
 from __future__ import annotations
 

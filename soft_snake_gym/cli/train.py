@@ -1,5 +1,4 @@
-"""``soft-snake train``: an SB3 agent (PPO or SAC) with YAML hyperparameters, in a resumable
-run folder."""
+"""``soft-snake train``: an SB3 agent (PPO or SAC) with YAML hyperparameters, in a resumable run folder."""
 
 from __future__ import annotations
 
@@ -52,7 +51,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _step_plan(cfg: TrainConfig, start: int) -> str:
     """``for 4,096 steps (3,000 rounded up to whole rollouts of 512 x 8 steps)``, and where the
-    checkpoints land when ``n_envs`` does not divide ``checkpoint_freq``."""
+    checkpoints land when ``n_envs`` does not divide ``checkpoint_freq``.
+    """
     end = planned_steps(cfg, start)
     chunk = steps_per_iteration(cfg)
     what = "rollouts of n_steps x n_envs" if cfg.algo == "PPO" else "iterations of train_freq x n_envs"

@@ -45,8 +45,10 @@ SLOW_SUBSTEPS = 1000
 # --- settings ---------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Randomization:
-    """Per-episode physics randomization: each field is ``None`` (not randomized) or a range
-    ``[low, high]`` from which the value is drawn uniformly at every ``reset``.
+    """Per-episode physics randomization.
+
+    Each field is ``None`` (not randomized) or a range ``[low, high]`` from which the value is drawn
+    uniformly at every ``reset``.
 
     Fields map onto :class:`~soft_snake_gym.params.Rod` (``E``, ``E_bend``, ``damping_bend``, ``damping_stretch``),
     :class:`~soft_snake_gym.params.Fluid` (``rho``, ``C_f``, ``C_D``, ``C_A``) and
@@ -129,7 +131,8 @@ class Randomization:
 
     def check(self, medium: str, ground: Ground, where: str) -> None:
         """Raise ``ConfigError`` if a randomized parameter has no effect in ``medium`` or if
-        a draw could give ``mu_d > mu_s`` (with ``ground`` the values not randomized)."""
+        a draw could give ``mu_d > mu_s`` (with ``ground`` the values not randomized).
+        """
         unused = {"water": "ground", "ground": "fluid"}.get(medium)
         useless = [
             f.name
@@ -284,8 +287,10 @@ class SoftRobotEnv(gym.Env):
 
     @classmethod
     def over_arrays(cls, settings: BaseSettings, sim: Simulator, task: TaskArrays | None):
-        """An env (no rendering) over a given simulator and task arrays, e.g. views of a batch's
-        stacked arrays: how the vector env keeps one env object per robot."""
+        """An env (no rendering) over a given simulator and task arrays, e.g.
+
+        views of a batch's stacked arrays: how the vector env keeps one env object per robot.
+        """
         env = cls.__new__(cls)
         env._setup(settings, None, sim=sim, task=task)
         return env
@@ -364,9 +369,11 @@ class SoftRobotEnv(gym.Env):
         raise NotImplementedError
 
     def _action_params(self) -> tuple[int, float, float, float, int]:
-        """How the action becomes inputs and what the energy cost charges: (``task.SWIM`` or
-        ``task.INCH``, rate of action 1.0, lower and upper bound of the driven rest shape,
-        ``task.ENERGY_ACTUATOR`` or ``task.ENERGY_MEDIUM``)."""
+        """How the action becomes inputs and what the energy cost charges.
+
+        (``task.SWIM`` or ``task.INCH``, rate of action 1.0, lower and upper bound of the driven
+        rest shape, ``task.ENERGY_ACTUATOR`` or ``task.ENERGY_MEDIUM``).
+        """
         raise NotImplementedError
 
     def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
@@ -374,7 +381,8 @@ class SoftRobotEnv(gym.Env):
 
     def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
         """The body's entries of ``info`` from the unclipped observation ``raw`` and the driven
-        rest shape ``shape`` (new arrays); (n_obs,) for one robot or (n, n_obs) for a batch."""
+        rest shape ``shape`` (new arrays); (n_obs,) for one robot or (n, n_obs) for a batch.
+        """
         raise NotImplementedError
 
     # --- info: the one place it is built (the vector env calls these too) -------------------
@@ -524,10 +532,13 @@ class SoftRobotEnv(gym.Env):
         return task.obs.copy(), r[T.R_REWARD], not ok, False, info
 
     def render(self):
-        """The current frame: an (H, W, 3) uint8 RGB array with ``render_mode="rgb_array"``;
-        with ``"human"``, draws into a window and returns None. The picture shows the body
-        (head in red), the recent trails of the centre of mass and the head, the goal
-        direction, the time and, on the ground, the nodes stuck to the floor."""
+        """The current frame.
+
+        An (H, W, 3) uint8 RGB array with ``render_mode="rgb_array"``; with ``"human"``, draws into
+        a window and returns None. The picture shows the body (head in red), the recent trails of
+        the centre of mass and the head, the goal direction, the time and, on the ground, the nodes
+        stuck to the floor.
+        """
         if self.render_mode is None:
             gym.logger.warn(
                 f"render() called without a render_mode; create the env with "
@@ -558,8 +569,11 @@ class SoftRobotEnv(gym.Env):
         return self._failure
 
     def fail(self, reason: str) -> None:
-        """End the episode with ``reason``: what a step that failed does (the vector env calls
-        it for a robot whose batched step failed)."""
+        """End the episode with ``reason``.
+
+        What a step that failed does (the vector env calls it for a robot whose batched step
+        failed).
+        """
         self._failure = self.sim.failure = reason
 
     def close(self) -> None:
@@ -605,8 +619,11 @@ class SoftRobotEnv(gym.Env):
         self._last_x = self.sim.x
 
     def _noisy_straight_body(self, rng, kbar0: np.ndarray, lbar: np.ndarray, length_noise: bool):
-        """A body near rest: curvatures ``kbar0 + U(-s, s)``, chord heading ``U(-s, s)`` (about
-        +x, whatever the goal), rest lengths ``lbar (1 + U(-s, s))`` if ``length_noise``; at rest."""
+        """A body near rest.
+
+        Curvatures ``kbar0 + U(-s, s)``, chord heading ``U(-s, s)`` (about +x, whatever the goal),
+        rest lengths ``lbar (1 + U(-s, s))`` if ``length_noise``; at rest.
+        """
         s = self.settings.reset_noise_scale
         kappa0 = kbar0 + rng.uniform(-s, s, kbar0.shape)
         if length_noise:

@@ -56,7 +56,8 @@ def scale_rates(action, scale, value, lo, hi, dt, out):
 @njit(cache=True)
 def body_velocity(q, v, w):
     """Heading of the tail-to-head chord [rad] and the centre-of-mass velocity along it and to
-    its left [m/s]; ``w`` (N,) are the mass fractions."""
+    its left [m/s]; ``w`` (N,) are the mass fractions.
+    """
     n = w.size
     vx = 0.0
     vy = 0.0
@@ -81,8 +82,10 @@ def _clip_into(raw, low, high, out):
 
 @njit(cache=True, error_model="numpy")
 def swim_observation(q, v, kbar, w, goal, low, high, raw, out):
-    """The ``SoftEel-v0`` observation: kappa (N-2), kappa_dot (N-2), kbar (N-2),
-    com_velocity_body (2), goal_direction_body (2: cos, sin of ``goal`` minus the heading).
+    """The ``SoftEel-v0`` observation.
+
+    Kappa (N-2), kappa_dot (N-2), kbar (N-2), com_velocity_body (2), goal_direction_body (2: cos,
+    sin of ``goal`` minus the heading).
 
     Writes the unclipped values (float64) into ``raw`` and, clipped to ``[low, high]``, into
     ``out`` (float32). Returns the heading [rad].
@@ -103,9 +106,12 @@ def swim_observation(q, v, kbar, w, goal, low, high, raw, out):
 
 @njit(cache=True, error_model="numpy")
 def inch_observation(q, v, lbar, friction, ground, w, low, high, raw, out):
-    """The ``SoftWorm-v0`` observation: edge_lengths (N-1), edge_length_rates (N-1),
-    lbar (N-1), stuck (N, 0/1 from the friction states ``friction``; all 0 unless ``ground``),
-    com_velocity_body (2). Same outputs as :func:`swim_observation`; returns the heading [rad]."""
+    """The ``SoftWorm-v0`` observation.
+
+    Edge_lengths (N-1), edge_length_rates (N-1), lbar (N-1), stuck (N, 0/1 from the friction states
+    ``friction``; all 0 unless ``ground``), com_velocity_body (2). Same outputs as
+    :func:`swim_observation`; returns the heading [rad].
+    """
     m = lbar.size
     geometry.edge_lengths(q, raw[:m])
     geometry.edge_length_rates(q, v, raw[m : 2 * m])

@@ -1,5 +1,6 @@
-"""The task layer of one robot as numba kernels: action to inputs, physics step, observation,
-reward terms and running metrics, in one compiled call.
+"""The task layer of one robot as numba kernels.
+
+Action to inputs, physics step, observation, reward terms and running metrics, in one compiled call.
 
 ``SoftEel-v0`` and ``SoftWorm-v0`` call :func:`robot_step` for their one robot; the batched
 vector env (:mod:`soft_snake_gym.envs.vector`) calls :func:`batch_step`, a ``prange`` loop of
@@ -110,8 +111,7 @@ METRIC_KEYS = (
 
 
 class TaskArrays(NamedTuple):
-    """The task's arrays of one robot (or of ``n``, stacked on a leading axis), as the task
-    kernels take them.
+    """The task's arrays of one robot (or of ``n``, stacked on a leading axis), as the task kernels take them.
 
     Attributes:
         tp: the task's constants at ``T_*`` (kind, action scale and bounds, control step, goal,
@@ -163,7 +163,8 @@ def allocate_task(N: int, n_act: int, n_obs: int, batch: tuple[int, ...] = ()) -
 
 def reward_terms(r: Any) -> dict[str, Any]:
     """The forward speed [m/s] and the reward terms of the last step, by name, from ``rs``
-    (a list for one robot, or ``rs.T``, rows over robots, for a batch)."""
+    (a list for one robot, or ``rs.T``, rows over robots, for a batch).
+    """
     terms = {"forward_speed": r[R_FWD]}
     terms.update(zip(TERM_KEYS, r[R_RF : R_RFAIL + 1], strict=True))
     return terms
@@ -171,7 +172,8 @@ def reward_terms(r: Any) -> dict[str, Any]:
 
 def episode_metrics(r: Any, keys: tuple[str, ...]) -> dict[str, Any]:
     """The running episode metrics (docs/model.md §8) by name, from ``rs`` as for
-    :func:`reward_terms`; ``keys`` are :data:`METRIC_KEYS` with the medium's energy named."""
+    :func:`reward_terms`; ``keys`` are :data:`METRIC_KEYS` with the medium's energy named.
+    """
     return dict(zip(keys, r[M_AVG:], strict=True))
 
 
@@ -216,9 +218,11 @@ def _metrics(out, prm, tp, rs):
 
 @njit(cache=True, error_model="numpy")
 def robot_reset(s, t):
-    """After the simulator's reset of ``s`` (:class:`~soft_snake_gym.physics.SimArrays`): the
-    episode of ``t`` (:class:`TaskArrays`) starts here (centre of mass, zero powers and rewards,
-    metrics, observation)."""
+    """After the simulator's reset of ``s`` (:class:`~soft_snake_gym.physics.SimArrays`).
+
+    The episode of ``t`` (:class:`TaskArrays`) starts here (centre of mass, zero powers and rewards,
+    metrics, observation).
+    """
     s, t = SimArrays(*s), TaskArrays(*t)
     rs = t.rs
     rs[:] = 0.0
@@ -305,7 +309,8 @@ def _robot(s, t, i):
 def batch_step(active, s, t, status):
     """:func:`robot_step` for every robot ``i`` with ``active[i]``, of stacked simulator arrays
     ``s`` and task arrays ``t`` (leading robot axis), spread over numba's threads; robot ``i``'s
-    status into ``status[i]``."""
+    status into ``status[i]``.
+    """
     s, t = SimArrays(*s), TaskArrays(*t)
     for i in prange(status.size):
         if active[i]:

@@ -260,8 +260,10 @@ class SoftVectorEnv(VectorEnv):
     # --- the engine, shared with the SB3 adapter (soft_snake_gym.sb3) ---------------------------
     @property
     def obs(self) -> np.ndarray:
-        """The robots' current observations, (n, n_obs) float32: the batch's buffer, which the
-        next step overwrites (copy to keep)."""
+        """The robots' current observations, (n, n_obs) float32.
+
+        The batch's buffer, which the next step overwrites (copy to keep).
+        """
         return self.batch.task.obs
 
     @property
@@ -335,7 +337,8 @@ class SoftVectorEnv(VectorEnv):
 
     def reset_robot(self, i: int, seed: int | None = None, options: dict[str, Any] | None = None) -> dict:
         """Reset robot ``i`` through its env object and start its episode counters; returns
-        that env's reset info."""
+        that env's reset info.
+        """
         _, info = self.envs[i].reset(seed=seed, options=options)
         self._elapsed[i] = 0
         self._returns[i] = 0.0
@@ -343,8 +346,10 @@ class SoftVectorEnv(VectorEnv):
         return info
 
     def reset_robots(self, seeds: list[int | None], options: list[dict[str, Any] | None]) -> list[dict]:
-        """Reset every robot, robot ``i`` with ``seeds[i]`` and ``options[i]``; clears pending
-        autoresets. Returns the robots' reset infos."""
+        """Reset every robot, robot ``i`` with ``seeds[i]`` and ``options[i]``; clears pending autoresets.
+
+        Returns the robots' reset infos.
+        """
         infos = [self.reset_robot(i, seeds[i], options[i]) for i in range(self.num_envs)]
         self._autoreset[:] = False
         self._needs_reset = False
@@ -356,7 +361,8 @@ class SoftVectorEnv(VectorEnv):
 
     def episode_stats(self, dones: np.ndarray) -> dict[str, np.ndarray]:
         """``{"r", "l", "t"}`` (return, length, wall-clock seconds) of the episodes that end,
-        (n,) each, zero where ``dones`` is False (as ``RecordEpisodeStatistics``)."""
+        (n,) each, zero where ``dones`` is False (as ``RecordEpisodeStatistics``).
+        """
         now = time.perf_counter()
         return {
             "r": np.where(dones, self._returns, 0.0),
@@ -367,7 +373,8 @@ class SoftVectorEnv(VectorEnv):
     def infos(self, stepped: np.ndarray, reset: np.ndarray, reset_infos: list[dict]) -> dict[str, Any]:
         """Infos of robots that ``stepped`` and were ``reset`` (``reset_infos`` in robot order),
         with Gymnasium's ``_key`` masks, as ``SyncVectorEnv`` would gather the single envs'
-        (the entries are built by the same env methods)."""
+        (the entries are built by the same env methods).
+        """
         n = self.num_envs
         infos: dict[str, Any] = {}
         present = stepped | reset

@@ -1,7 +1,8 @@
-"""Forces on the discrete rod and their Jacobians (docs/model.md §3-§5): elastic and damping
-forces, drag and added mass of the water, kinetic friction on the ground, and the powers and
-energies they give. Kernels on flat interleaved ``q``, ``v`` (2N,) and the parameter vector
-``prm`` (``P_*``); forces are added into their outputs, Jacobians into a band
+"""Forces on the discrete rod and their Jacobians (docs/model.md §3-§5).
+
+Elastic and damping forces, drag and added mass of the water, kinetic friction on the ground, and
+the powers and energies they give. Kernels on flat interleaved ``q``, ``v`` (2N,) and the parameter
+vector ``prm`` (``P_*``); forces are added into their outputs, Jacobians into a band
 (:mod:`~soft_snake_gym.physics.banded`).
 """
 
@@ -39,8 +40,10 @@ drop_stale_cache(__file__, [banded.__file__, geometry.__file__, layout.__file__]
 
 @njit(cache=True, inline="always", error_model="numpy")
 def added_mass_coefficient(prm):
-    """``rho pi C_A a^2``, the added mass per length of the body across itself (docs/model.md §4):
-    an edge of length ``l`` entrains ``mu_n = rho pi C_A a^2 l`` [kg/m]."""
+    """``rho pi C_A a^2``, the added mass per length of the body across itself (docs/model.md §4).
+
+    An edge of length ``l`` entrains ``mu_n = rho pi C_A a^2 l`` [kg/m].
+    """
     return prm[P_RHO] * math.pi * prm[P_CA] * prm[P_A] * prm[P_A]
 
 
@@ -273,9 +276,11 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
 
 @njit(cache=True, error_model="numpy")
 def added_mass(q, prm, dv, out, J, coef, apply, jac):
-    """Added mass of docs/model.md §4: ``M_A`` puts ``mu_n/4 n n^T`` on the four blocks of each
-    edge, ``mu_n = rho pi C_A a^2 l``. If ``apply``, add ``M_A dv`` to ``out``; if ``jac``,
-    add ``coef M_A`` to the band ``J``."""
+    """Added mass of docs/model.md §4.
+
+    ``M_A`` puts ``mu_n/4 n n^T`` on the four blocks of each edge, ``mu_n = rho pi C_A a^2 l``. If
+    ``apply``, add ``M_A dv`` to ``out``; if ``jac``, add ``coef M_A`` to the band ``J``.
+    """
     N = q.size // 2
     cm = added_mass_coefficient(prm)
     for i in range(N - 1):
@@ -300,7 +305,8 @@ def added_mass(q, prm, dv, out, J, coef, apply, jac):
 @njit(cache=True, error_model="numpy")
 def solve_mass(q, prm, m, F, a, J, piv, water):
     """Accelerations ``a`` from ``(M + M_A(q)) a = F`` by a banded solve (``M_A = 0`` unless
-    ``water``); ``m`` is the node mass per coordinate (2N,)."""
+    ``water``); ``m`` is the node mass per coordinate (2N,).
+    """
     n = q.size
     if not water:
         for i in range(n):
@@ -317,13 +323,13 @@ def solve_mass(q, prm, m, F, a, J, piv, water):
 
 @njit(cache=True, error_model="numpy")
 def fluid_momentum(q, v, prm, R, sp, sg, J, dt, jac):
-    """The water's kinetic energy ``T_f = sum_i 1/2 mu_n (v^i . n^i)^2`` (docs/model.md §4) and its
-    derivatives: adds ``sp P_f + sg G`` to R (2N,), with the water's momentum
-    ``P_f = dT_f/dv`` (half of each edge's ``mu_n v_n n`` to each node) [N s] and
+    """The water's kinetic energy ``T_f = sum_i 1/2 mu_n (v^i .
+
+    n^i)^2`` (docs/model.md §4) and its derivatives: adds ``sp P_f + sg G`` to R (2N,), with the
+    water's momentum ``P_f = dT_f/dv`` (half of each edge's ``mu_n v_n n`` to each node) [N s] and
     ``G = dT_f/dx`` [N]. If ``jac``, adds the Jacobian of ``P_f - dt G`` with respect to the
-    end-of-step velocity (``x = x0 + dt v``) to the band J:
-    ``dP_f/dv + dt (dP_f/dx - dG/dv) - dt^2 dG/dx`` (``M_A``, a skew gyroscopic part and a
-    symmetric curvature part). Returns ``T_f`` [J].
+    end-of-step velocity (``x = x0 + dt v``) to the band J: ``dP_f/dv + dt (dP_f/dx - dG/dv) - dt^2
+    dG/dx`` (``M_A``, a skew gyroscopic part and a symmetric curvature part). Returns ``T_f`` [J].
 
     Per edge, with ``c = rho pi C_A a^2`` (``mu_n = c l``), ``e = x[i+1] - x[i]``:
     ``dT/de = c (vn^2/2 t - vn vt n)``, ``d(mu_n vn n)/de = c (-vt n n^T + vn (n t^T - t n^T))``,
@@ -373,7 +379,8 @@ def fluid_momentum(q, v, prm, R, sp, sg, J, dt, jac):
 def munk_force(q, v, prm, F):
     """Adds the velocity part of the consistent added-mass force, ``dT_f/dx - (dP_f/dx) v``
     (the turning normal's terms, the Munk moment), to F (2N,) [N]. With it,
-    ``(M + M_A) a = F_other + munk`` is the Lagrangian equation of ``T_f`` (docs/model.md §4)."""
+    ``(M + M_A) a = F_other + munk`` is the Lagrangian equation of ``T_f`` (docs/model.md §4).
+    """
     N = q.size // 2
     cm = added_mass_coefficient(prm)
     for i in range(N - 1):
@@ -412,7 +419,8 @@ def fluid_kinetic_energy(q, v, prm):
 @njit(cache=True, error_model="numpy")
 def damping_power(q, v, prm):
     """Power lost to material damping, ``damping_bend sum kappa_dot^2 + damping_stretch sum
-    ldot^2`` (docs/model.md §3) [W]."""
+    ldot^2`` (docs/model.md §3) [W].
+    """
     N = q.size // 2
     db, ds = prm[P_DBEND], prm[P_DSTRETCH]
     p = 0.0

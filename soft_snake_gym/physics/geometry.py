@@ -1,6 +1,8 @@
-"""Geometry of the discrete rod (docs/model.md §2): turning angles and curvatures, edge frames,
-lengths and their rates, node tangents, and self-intersection. Kernels on flat interleaved
-positions ``q`` and velocities ``v`` (2N,); outputs are written in place.
+"""Geometry of the discrete rod (docs/model.md §2).
+
+Turning angles and curvatures, edge frames, lengths and their rates, node tangents, and
+self-intersection. Kernels on flat interleaved positions ``q`` and velocities ``v`` (2N,); outputs
+are written in place.
 """
 
 from __future__ import annotations
@@ -40,7 +42,8 @@ def turning(q, j):
 def edge_frame(q, v, i):
     """Edge i's length ``l``, unit tangent ``t`` and normal ``n = (-t_y, t_x)``, its mean
     velocity ``v^i = (v[i] + v[i+1]) / 2`` and that velocity's components ``v_t``, ``v_n``
-    (docs/model.md §2, §4), as (l, tx, ty, nx, ny, vx, vy, vt, vn)."""
+    (docs/model.md §2, §4), as (l, tx, ty, nx, ny, vx, vy, vt, vn).
+    """
     ex = q[2 * i + 2] - q[2 * i]
     ey = q[2 * i + 3] - q[2 * i + 1]
     l = math.sqrt(ex * ex + ey * ey)
@@ -121,7 +124,8 @@ def _segments_cross(q, a, b):
 @njit(cache=True, error_model="numpy")
 def self_intersects(q, keys, order):
     """Sweep and prune over the edges' x-extents; ``order`` (N-1,) persists between calls, so
-    the insertion sort is nearly linear for a body that moves a little each step."""
+    the insertion sort is nearly linear for a body that moves a little each step.
+    """
     ne = q.size // 2 - 1
     for e in range(ne):
         keys[e] = min(q[2 * e], q[2 * e + 2])
@@ -146,8 +150,11 @@ def self_intersects(q, keys, order):
 
 
 def polyline_crosses(x: np.ndarray) -> bool:
-    """True if the polyline through the points ``x`` (n, 2) [m] crosses itself: two of its
-    segments that share no point cross properly (:func:`self_intersects`, outside a simulator)."""
+    """True if the polyline through the points ``x`` (n, 2) [m] crosses itself.
+
+    Two of its segments that share no point cross properly (:func:`self_intersects`, outside a
+    simulator).
+    """
     q = np.ascontiguousarray(x, dtype=np.float64).ravel()
     ne = q.size // 2 - 1
     return bool(self_intersects(q, np.empty(ne), np.arange(ne)))

@@ -39,9 +39,12 @@ def node_masses(config: SimConfig) -> np.ndarray:
 
 
 def auto_substeps(config: SimConfig) -> int:
-    """Sub-steps per ``h``: 1 for backward Euler; for the explicit method enough that each is
-    at most ``0.5 / omega_max`` and ``1 / (damping rate)``, with Gershgorin bounds on the
-    highest elastic frequency and the fastest damping rate."""
+    """Sub-steps per ``h``.
+
+    1 for backward Euler; for the explicit method enough that each is at most ``0.5 / omega_max``
+    and ``1 / (damping rate)``, with Gershgorin bounds on the highest elastic frequency and the
+    fastest damping rate.
+    """
     integ, rod = config.integrator, config.rod
     if integ.substeps is not None:
         return integ.substeps
@@ -208,9 +211,11 @@ class Simulator:
         return int(self.arrays.prm[L.P_SUBSTEPS])
 
     def reset(self, x=None, v=None, kbar=None, lbar=None) -> None:
-        """Start over: by default a straight body at rest along +x, centre of mass at the
-        origin, rest shape straight with the configured edge length; clears accumulated
-        energies, time and any failure."""
+        """Start over.
+
+        By default a straight body at rest along +x, centre of mass at the origin, rest shape
+        straight with the configured edge length; clears accumulated energies, time and any failure.
+        """
         rod = self.config.rod
         self.arrays.kbar[:] = 0.0
         self.arrays.lbar[:] = rod.edge_length
@@ -290,7 +295,8 @@ class Simulator:
     def step(self, u_k=None, u_l=None) -> bool:
         """Advance by ``h`` with curvature rates ``u_k`` (N-2,) and length rates ``u_l``
         (N-1,) held constant (``None``: zero). Returns True if the step succeeded; on failure
-        :attr:`failure` names the reason."""
+        :attr:`failure` names the reason.
+        """
         return self.advance(1, u_k, u_l)
 
     def advance(self, n_steps: int, u_k=None, u_l=None) -> bool:
@@ -394,15 +400,18 @@ class Simulator:
         return float(0.5 * self.arrays.buf[L.B_M] @ (self.arrays.v * self.arrays.v))
 
     def fluid_kinetic_energy(self) -> float:
-        """Kinetic energy of the water moved with the body, ``T_f = sum_i 1/2 mu_n (v^i . n^i)^2``
-        (docs/model.md §4; 0 out of water) [J]."""
+        """Kinetic energy of the water moved with the body, ``T_f = sum_i 1/2 mu_n (v^i .
+
+        n^i)^2`` (docs/model.md §4; 0 out of water) [J].
+        """
         if self.config.medium != "water":
             return 0.0
         a = self.arrays
         return float(forces.fluid_kinetic_energy(a.q, a.v, a.prm))
 
     def energy_ledger(self) -> dict[str, float]:
-        """The energy balance since the last :meth:`reset` or :meth:`set_state` (docs/model.md §4):
+        """The energy balance since the last :meth:`reset` or :meth:`set_state` (docs/model.md §4).
+
         ``actuator_work = fluid_dissipation + damping_dissipation + friction_dissipation +
         delta_kinetic + delta_elastic + delta_fluid_kinetic + error``, all in J.
 
@@ -426,7 +435,8 @@ class Simulator:
     def force_jacobians(self, water: bool | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Forces and their analytic Jacobians ``dF/dx`` and ``dF/dv`` as dense (2N, 2N)
         matrices in interleaved (x0, y0, x1, ...) order: elastic, damping and (in water)
-        drag. For checking and analysis; the stepper uses the banded form."""
+        drag. For checking and analysis; the stepper uses the banded form.
+        """
         water = self.config.medium == "water" if water is None else water
         a = self.arrays
         n = 2 * self.N
@@ -478,13 +488,15 @@ class Simulator:
     @property
     def actuator_energy(self) -> float:
         """Actuator energy since reset, the sum over steps of |work| [J] (a real actuator
-        does not get back the work the body does on it)."""
+        does not get back the work the body does on it).
+        """
         return float(self.arrays.out[L.O_E_ACT])
 
     @property
     def damping_power(self) -> float:
         """Power lost to material damping over the last step,
-        ``damping_bend sum kappa_dot^2 + damping_stretch sum ldot^2`` [W]."""
+        ``damping_bend sum kappa_dot^2 + damping_stretch sum ldot^2`` [W].
+        """
         return float(self.arrays.out[L.O_P_DAMP])
 
     @property

@@ -1,8 +1,9 @@
-"""Time stepping of the discrete rod (docs/model.md §5-§5a): backward Euler by damped Newton on
-the banded Jacobian, explicit symplectic Euler, the stick-slip decision both share, the state
-check after each step, the energy ledger, and :func:`simulate`, which advances one robot's
-:class:`~soft_snake_gym.physics.layout.SimArrays` by whole steps. Nothing here allocates or
-raises; failures come back as a status code (``layout.OK``, ...).
+"""Time stepping of the discrete rod (docs/model.md §5-§5a).
+
+Backward Euler by damped Newton on the banded Jacobian, explicit symplectic Euler, the stick-slip
+decision both share, the state check after each step, the energy ledger, and :func:`simulate`, which
+advances one robot's :class:`~soft_snake_gym.physics.layout.SimArrays` by whole steps. Nothing here
+allocates or raises; failures come back as a status code (``layout.OK``, ...).
 """
 
 from __future__ import annotations
@@ -120,10 +121,11 @@ def check_state(q, v, lbar, prm, buf, ibuf):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def classify_contact(v, state, i, limit, at_limit):
-    """The stick-slip decision of node i on the ground (docs/model.md §5), shared by both
-    integrators: the node sticks (``state[i] = STUCK``, its velocity set to zero) if its speed
-    is below ``limit`` [m/s] (or equal to it, if ``at_limit``), else it slides
-    (``state[i] = SLIDING``, velocity kept). Returns True if it sticks.
+    """The stick-slip decision of node i on the ground (docs/model.md §5), shared by both integrators.
+
+    The node sticks (``state[i] = STUCK``, its velocity set to zero) if its speed is below ``limit``
+    [m/s] (or equal to it, if ``at_limit``), else it slides (``state[i] = SLIDING``, velocity kept).
+    Returns True if it sticks.
 
     Backward Euler passes ``limit = V_tol``; the explicit method passes the speed static
     friction removes in a sub-step, ``mu_s g dt``, with ``at_limit``.
@@ -145,7 +147,8 @@ def _be_residual(s, dt, medium, jac):
     in momentum form, ``R = M (v - v0) + P_f(q, v) - P_f(q0, v0) - dt (F(q, v) + dT_f/dx(q, v))``
     (``P_f(q0, v0)`` in ``buf[B_P0]``); with ``added_mass = "kelasidi"``,
     ``R = (M + M_A(q)) (v - v0) - dt F(q, v)``. Returns
-    (squared 2-norm, max-norm of R/m [m/s], fluid power, friction power)."""
+    (squared 2-norm, max-norm of R/m [m/s], fluid power, friction power).
+    """
     q, v, kbar, lbar, prm, buf, J, ibuf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.J, s.ibuf
     n = q.size
     q0, v0, F, R, m = buf[B_Q0], buf[B_V0], buf[B_F], buf[B_R], buf[B_M]
@@ -247,7 +250,9 @@ def _update_contacts(v, buf, ibuf, prm, dt, n):
 @njit(cache=True, error_model="numpy")
 def _be_substep(s, dt, medium):
     """One backward-Euler step by damped Newton on the banded analytic Jacobian (docs/model.md §5a).
-    Returns (status, iterations, residual, fluid power, friction power)."""
+
+    Returns (status, iterations, residual, fluid power, friction power).
+    """
     q, v, prm, buf, J, ibuf = s.q, s.v, s.prm, s.buf, s.J, s.ibuf
     n = q.size
     q0, v0, vacc, dv = buf[B_Q0], buf[B_V0], buf[B_VACC], buf[B_DV]
@@ -322,12 +327,13 @@ def _be_substep(s, dt, medium):
 @njit(cache=True, error_model="numpy")
 def _symplectic_substep(s, dt, medium):
     """One explicit semi-implicit (symplectic) Euler step: kick with F(q, v), then drift.
+
     In water ``(M + M_A(q)) a = F``, plus with the consistent added mass the velocity terms of
     :func:`munk_force`. On the ground, friction is decided by the end of the kick (docs/model.md
-    §5): a node whose frictionless end velocity ``w`` could be stopped within ``mu_s F_N``
-    sticks, any other slides with ``mu_d F_N`` against ``w`` (the lumped mass matrix is
-    diagonal on the ground, so each node is decided on its own).
-    Returns (fluid power, friction power)."""
+    §5): a node whose frictionless end velocity ``w`` could be stopped within ``mu_s F_N`` sticks,
+    any other slides with ``mu_d F_N`` against ``w`` (the lumped mass matrix is diagonal on the
+    ground, so each node is decided on its own). Returns (fluid power, friction power).
+    """
     q, v, kbar, lbar, prm, buf, J, ibuf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.J, s.ibuf
     n = q.size
     F, a, m, fext = buf[B_F], buf[B_A], buf[B_M], buf[B_FEXT]
@@ -362,7 +368,8 @@ def ledger_energies(s):
     """Write the body's kinetic and elastic energy and the water's ``T_f`` (0 out of water)
     into ``out[O_E_KIN]``, ``out[O_E_ELASTIC]``, ``out[O_T_FLUID]`` [J], and the energy ledger
     since the start recorded at ``O_L0_*`` into ``out[O_LEDGER:]`` (``LEDGER_KEYS``); ``s`` is
-    :class:`~soft_snake_gym.physics.layout.SimArrays` or the plain tuple of its arrays."""
+    :class:`~soft_snake_gym.physics.layout.SimArrays` or the plain tuple of its arrays.
+    """
     s = SimArrays(*s)
     q, v, kbar, lbar, prm, buf, out = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.out
     m = buf[B_M]
@@ -394,9 +401,10 @@ def ledger_energies(s):
 
 @njit(cache=True, error_model="numpy")
 def simulate(s, u_k, u_l, n_steps):
-    """Advance one robot by ``n_steps`` steps of ``h`` with inputs held constant; stops at the
-    first failure. Per step: rest shape moves by ``dt u`` each sub-step, the state follows by
-    the chosen integrator, then the state is checked.
+    """Advance one robot by ``n_steps`` steps of ``h`` with inputs held constant; stops at the first failure.
+
+    Per step: rest shape moves by ``dt u`` each sub-step, the state follows by the chosen
+    integrator, then the state is checked.
 
     Args:
         s: the robot's :class:`~soft_snake_gym.physics.layout.SimArrays` (or, from Python, the

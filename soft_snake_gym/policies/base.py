@@ -106,8 +106,10 @@ def env_layout(env: Any) -> EnvLayout:
 
 
 class BaselinePolicy:
-    """Base class: subclasses set ``Params`` (a frozen dataclass), ``needs`` (observation
-    blocks), ``kind`` and implement :meth:`_control`.
+    """Base class.
+
+    Subclasses set ``Params`` (a frozen dataclass), ``needs`` (observation blocks), ``kind`` and
+    implement :meth:`_control`.
 
     Args:
         env: the environment (gymnasium env, wrapper or DummyVecEnv) to control.
@@ -142,8 +144,10 @@ class BaselinePolicy:
 
     @classmethod
     def from_yaml(cls, env: Any, path: str | Path, **overrides: Any) -> BaselinePolicy:
-        """Build from a YAML mapping of ``Params`` fields (``overrides`` win): a shipped policy
-        config by name (``"pid"``) or a file."""
+        """Build from a YAML mapping of ``Params`` fields (``overrides`` win).
+
+        A shipped policy config by name (``"pid"``) or a file.
+        """
         data = load_yaml(config_path(path, "policy"))
         return cls(env, **{**data, **overrides})
 

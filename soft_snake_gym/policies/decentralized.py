@@ -1,5 +1,4 @@
-"""Decentralized phase PID (docs/model.md §7): no shared clock, each node sees its head-ward
-neighbour.
+"""Decentralized phase PID (docs/model.md §7): no shared clock, each node sees its head-ward neighbour.
 
 Node j estimates its own phase from its turning angle and rate,
 ``psihat_j = atan2(phi_j, phi_dot_j / omega)``, and takes its reference phase from the

@@ -61,7 +61,8 @@ class OpenLoopParams(SerpenoidParams):
 
 
 class OpenLoopSerpenoid(_SerpenoidPolicy):
-    """The rest curvature follows the serpenoid (docs/model.md §7):
+    """The rest curvature follows the serpenoid (docs/model.md §7).
+
     ``u = kappa_dot_des + rest_gain (kappa_des - kbar)``.
 
     ``kbar`` is the controller's own command (the integral of its rates, what a motor's

@@ -1,2 +1,5 @@
-"""Studies over many episodes: parameter sweeps, trajectory figures, the thesis reproduction report,
-comparisons of policies and convergence in the time step."""
+"""Studies over many episodes.
+
+Parameter sweeps, trajectory figures, the thesis reproduction report, comparisons of policies and
+convergence in the time step.
+"""

@@ -1,5 +1,4 @@
-"""Convergence in the time step (docs/model.md §5a, §10): is a result made by the model or by the
-integrator?
+"""Convergence in the time step (docs/model.md §5a, §10): is a result made by the model or by the integrator?
 
 :func:`convergence` runs ONE seeded episode of a policy at the env's integration step and with
 that step divided by each refinement factor, through the env's own keyword
@@ -93,9 +92,10 @@ DEFAULT_FACTORS = (1, 4, 16)
 
 
 class RandomActions:
-    """A fixed seeded random-action sequence with SB3's ``predict``: uniform in
-    ``[-scale, scale]``, one draw of the generator per call (control step), restarted from
-    ``seed`` at every episode start.
+    """A fixed seeded random-action sequence with SB3's ``predict``.
+
+    Uniform in ``[-scale, scale]``, one draw of the generator per call (control step), restarted
+    from ``seed`` at every episode start.
 
     Args:
         action_space: the env's Box action space (its shape is used).
@@ -125,7 +125,8 @@ class RandomActions:
 
 def make_convergence_policy(spec: str, env: Any, seed: int) -> Any:
     """``"random"`` or ``"random:scale=0.5"`` as :class:`RandomActions` seeded with ``seed``;
-    anything else through :func:`soft_snake_gym.agents.make_policy`."""
+    anything else through :func:`soft_snake_gym.agents.make_policy`.
+    """
     if spec.partition(":")[0].strip() != "random":
         return make_policy(spec, env)
     _, params = parse_policy_spec(spec)
@@ -290,8 +291,11 @@ def convergence(
 
 
 def format_convergence(result: ConvergenceResult) -> str:
-    """The refinement table: per metric, the value at each factor, the ratio to the finest run,
-    the largest relative difference, the tolerance and PASS/FAIL."""
+    """The refinement table.
+
+    Per metric, the value at each factor, the ratio to the finest run, the largest relative
+    difference, the tolerance and PASS/FAIL.
+    """
     labels = {key: (label, unit) for key, label, unit in metric_columns(list(result.values))}
     r = result
     head = [f"{s} substep{'s' if s > 1 else ''}" for s in r.substeps]

@@ -1,6 +1,8 @@
-"""The trajectory figures: a swimming snapshot over one gait cycle, and centralized vs
-decentralized control from rest. Each function runs the episodes, draws them with
-:mod:`soft_snake_gym.plots` and returns the PNG's path."""
+"""The trajectory figures.
+
+A swimming snapshot over one gait cycle, and centralized vs decentralized control from rest. Each
+function runs the episodes, draws them with :mod:`soft_snake_gym.plots` and returns the PNG's path.
+"""
 
 from __future__ import annotations
 
@@ -83,7 +85,8 @@ def swim_snapshots(
     out: str | Path, policy_spec: str = "pid", settle_cycles: int = 2, snapshots: int = 12
 ) -> Path:
     """Body snapshots over one gait cycle of the thesis gait after ``settle_cycles`` cycles,
-    coloured by time, with the head, tail and centre-of-mass traces."""
+    coloured by time, with the head, tail and centre-of-mass traces.
+    """
     omega = SerpenoidParams().omega
     period = 2 * math.pi / omega
     tr = rollout(
@@ -99,8 +102,11 @@ def swim_snapshots(
 
 
 def rest_start_options(n_nodes: int = 10) -> dict[str, np.ndarray]:
-    """Reset options: at rest, curvature (and rest curvature) equal to the thesis serpenoid at
-    t = 0 (docs/model.md §7, the decentralized start)."""
+    """Reset options.
+
+    At rest, curvature (and rest curvature) equal to the thesis serpenoid at t = 0 (docs/model.md
+    §7, the decentralized start).
+    """
     p = SerpenoidParams()
     kd, _ = serpenoid(
         serpenoid_phase(0.0, n_nodes - 2, p.omega, 2 * math.pi / (n_nodes - 2)), p.omega, p.alpha
@@ -119,8 +125,10 @@ def controller_comparison(
     centralized: str = COMPARISON_CENTRALIZED,
     decentralized: str = "decentralized",
 ) -> tuple[Path, dict[str, float]]:
-    """Centralized vs decentralized PID from rest: curvature error, curvature and input per
-    node over time. Returns the PNG and the mean error after :data:`SETTLED_AFTER` of each."""
+    """Centralized vs decentralized PID from rest: curvature error, curvature and input per node over time.
+
+    Returns the PNG and the mean error after :data:`SETTLED_AFTER` of each.
+    """
     specs = {"centralized": centralized, "decentralized": decentralized}
     runs = {
         name: rollout(

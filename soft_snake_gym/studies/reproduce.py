@@ -1,5 +1,7 @@
-"""The thesis reproduction: every sweep, both trajectory figures, the sources' headline case,
-and ``docs/thesis_reproduction.md`` with the finding-by-finding table, computed from the CSVs.
+"""The thesis reproduction.
+
+Every sweep, both trajectory figures, the sources' headline case, and
+``docs/thesis_reproduction.md`` with the finding-by-finding table, computed from the CSVs.
 
 Each finding the thesis states in words is turned into a count over the grid cells (how many
 comparisons go the stated way), so the verdict is a number, not an impression: **yes** when at
@@ -120,9 +122,11 @@ def _verdict(agree: int, total: int) -> str:
 
 
 def _pairs_increasing(table: dict, along: int, with_ties: bool = False):
-    """Count neighbouring pairs along axis ``along`` (0: first key, 1: second) where z rises
-    (by more than :data:`LEVEL` of the larger value); with ``with_ties`` also those that stay
-    level."""
+    """Count neighbouring pairs along axis ``along`` (0.
+
+    First key, 1: second) where z rises (by more than :data:`LEVEL` of the larger value); with
+    ``with_ties`` also those that stay level.
+    """
     keys = sorted(table)
     others = sorted({k[1 - along] for k in keys})
     agree = total = ties = 0
@@ -420,9 +424,10 @@ def headline_case(
     models: tuple[str, ...] | None = None,
     alphas: tuple[float, ...] = HEADLINE_ALPHAS,
 ) -> list[dict[str, Any]]:
-    """The sources' headline case on ``SoftEel-v0``: each controller of
-    :data:`HEADLINE_CONTROLLERS` at omega = 2 pi/3 rad/s and each amplitude, starting at rest on
-    its gait (``start_on_gait``, no start noise), for each physics model of
+    """The sources' headline case on ``SoftEel-v0``.
+
+    Each controller of :data:`HEADLINE_CONTROLLERS` at omega = 2 pi/3 rad/s and each amplitude,
+    starting at rest on its gait (``start_on_gait``, no start noise), for each physics model of
     :data:`HEADLINE_MODELS` (the package defaults and the ``thesis`` preset).
 
     Args:

@@ -194,7 +194,8 @@ def cell_key(cell: dict[str, Any]) -> str:
 def control_step(env_id: str, env_kwargs: dict[str, Any] | None = None) -> float:
     """The control step ``dt`` [s] of ``env_id`` made with ``env_kwargs`` (its ``dt``, or the
     integrator's step ``h``), read from the env itself; construction warnings are left to the
-    env that runs."""
+    env that runs.
+    """
     register_envs()
     kwargs = {k: v for k, v in (env_kwargs or {}).items() if k != "max_episode_steps"}
     with warnings.catch_warnings():

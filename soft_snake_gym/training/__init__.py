@@ -1,6 +1,9 @@
-"""Stable-Baselines3 training: YAML hyperparameters keyed by env id (:mod:`.config`), run folders
-and resume (:mod:`.run`), an evaluation callback that scores the agent against a baseline
-controller (:mod:`.callbacks`), and :func:`train` (:mod:`.train`)."""
+"""Stable-Baselines3 training.
+
+YAML hyperparameters keyed by env id (:mod:`.config`), run folders and resume (:mod:`.run`), an
+evaluation callback that scores the agent against a baseline controller (:mod:`.callbacks`), and
+:func:`train` (:mod:`.train`).
+"""
 
 from soft_snake_gym.training.config import (
     ACTIVATIONS,

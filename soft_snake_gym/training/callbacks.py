@@ -1,5 +1,8 @@
-"""Training callbacks: periodic checkpoints, and the evaluation that scores the agent against a
-baseline controller on the same seeds (learning_curve.csv, the best model)."""
+"""Training callbacks.
+
+Periodic checkpoints, and the evaluation that scores the agent against a baseline controller on the
+same seeds (learning_curve.csv, the best model).
+"""
 
 from __future__ import annotations
 
@@ -19,14 +22,16 @@ __all__ = ["make_callbacks"]
 def make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start: int = 0):
     """Checkpoints and the baseline evaluation; ``wall_s`` counts from ``started``; the best
     model is the best evaluation since ``stage_start`` (returns of a curriculum's earlier
-    stages used other rewards)."""
+    stages used other rewards).
+    """
     # here, not above: SB3 and torch take seconds to import
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
     class Checkpoint(BaseCallback):
         """Model and VecNormalize statistics at every multiple of ``checkpoint_freq``
         environment steps (counted from the run's start, so a resumed run keeps the grid;
-        the first step at or past the multiple when ``n_envs`` does not divide it)."""
+        the first step at or past the multiple when ``n_envs`` does not divide it).
+        """
 
         def _on_training_start(self) -> None:
             self.last = self.num_timesteps
@@ -40,7 +45,8 @@ def make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start:
 
     class BaselineEval(BaseCallback):
         """Scores the agent every ``eval_freq`` steps and the baseline once, on the same
-        seeds with the same metrics; logs both and appends them to learning_curve.csv."""
+        seeds with the same metrics; logs both and appends them to learning_curve.csv.
+        """
 
         def __init__(self):
             super().__init__()

@@ -260,9 +260,11 @@ def check_env_id(env_id: str) -> None:
 
 
 def steps_per_iteration(cfg: TrainConfig) -> int:
-    """Environment steps SB3 takes between two checks of the total: a whole rollout of
-    ``n_steps x n_envs`` for PPO, ``train_freq x n_envs`` for SAC. ``learn`` stops at the first
-    multiple of this at or past the total asked for."""
+    """Environment steps SB3 takes between two checks of the total.
+
+    A whole rollout of ``n_steps x n_envs`` for PPO, ``train_freq x n_envs`` for SAC. ``learn``
+    stops at the first multiple of this at or past the total asked for.
+    """
     defaults = inspect.signature(_algo_class(cfg.algo).__init__).parameters
     key = "n_steps" if cfg.algo == "PPO" else "train_freq"
     per_env = cfg.hyperparams.get(key, defaults[key].default)
@@ -270,9 +272,11 @@ def steps_per_iteration(cfg: TrainConfig) -> int:
 
 
 def planned_steps(cfg: TrainConfig, start: int = 0) -> int:
-    """The step count a run reaches when it trains from ``start`` towards ``cfg.n_timesteps``:
+    """The step count a run reaches when it trains from ``start`` towards ``cfg.n_timesteps``.
+
     ``n_timesteps`` rounded up to whole iterations (:func:`steps_per_iteration`) counted from
-    ``start``; ``start`` itself if it is already there."""
+    ``start``; ``start`` itself if it is already there.
+    """
     chunk = steps_per_iteration(cfg)
     remaining = cfg.n_timesteps - start
     return start + (-(-remaining // chunk) * chunk if remaining > 0 else 0)

@@ -1,5 +1,7 @@
-"""The run folder: what a run writes (config, command, meta), its checkpoints and how a run
-resumes; and the learning-curve figure drawn from it.
+"""The run folder.
+
+What a run writes (config, command, meta), its checkpoints and how a run resumes; and the
+learning-curve figure drawn from it.
 
 A run folder holds everything needed to reproduce or continue a run::
 
@@ -55,7 +57,8 @@ __all__ = [
 @contextlib.contextmanager
 def _signals_held():
     """Ctrl-C and SIGTERM wait until the block ends (a save is never cut in half); on
-    platforms without ``pthread_sigmask`` the block runs as is."""
+    platforms without ``pthread_sigmask`` the block runs as is.
+    """
     if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -102,14 +105,14 @@ def _checkpoint_walls(run_dir: Path) -> dict[str, float]:
 
 
 class Terminated(KeyboardInterrupt):
-    """Training stopped by SIGTERM (a scheduler or ``kill``): handled as Ctrl-C, a checkpoint
-    is saved first."""
+    """Training stopped by SIGTERM (a scheduler or ``kill``): handled as Ctrl-C, a checkpoint is saved first."""
 
 
 @contextlib.contextmanager
 def _sigterm_as_interrupt():
     """Within the block, SIGTERM raises :class:`Terminated` (once; a repeat is ignored while
-    the checkpoint is written). Outside the main thread, signals stay as they are."""
+    the checkpoint is written). Outside the main thread, signals stay as they are.
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -132,7 +135,8 @@ NO_CHECKOUT = "none: the package is not a git checkout (an installed copy); see 
 def _git_commit(package_dir: Path | None = None) -> str:
     """The commit of the git checkout the package runs from, or :data:`NO_CHECKOUT` when it
     runs from an installed copy (``pip install .``) or git is missing. A checkout counts only
-    if it tracks the package itself, not merely encloses it (a venv inside another repo)."""
+    if it tracks the package itself, not merely encloses it (a venv inside another repo).
+    """
     where = package_dir or Path(__file__).resolve().parents[1]
     try:
         tracked = subprocess.run(
@@ -163,9 +167,11 @@ def _is_new_stage(cfg: TrainConfig, run_dir: Path) -> bool:
 
 
 def _record_resume(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> bool:
-    """Append the resuming command to command.txt. If settings other than ``n_timesteps``
-    changed (a curriculum: ``--resume DIR --hyperparams ...``), keep the earlier config.yaml
-    as config.<k>.yaml and return True: a new stage begins."""
+    """Append the resuming command to command.txt.
+
+    If settings other than ``n_timesteps`` changed (a curriculum: ``--resume DIR --hyperparams
+    ...``), keep the earlier config.yaml as config.<k>.yaml and return True: a new stage begins.
+    """
     path = run_dir / "config.yaml"
     new_stage = _is_new_stage(cfg, run_dir)
     if new_stage:
@@ -198,7 +204,8 @@ RUN_FILES = (
 
 def _check_new_run_dir(run_dir: Path) -> None:
     """A new run may start in a missing or empty folder, or in a folder of a run that left no
-    checkpoint (it failed or was stopped before its first one)."""
+    checkpoint (it failed or was stopped before its first one).
+    """
     if not run_dir.exists():
         return
     if not run_dir.is_dir():
@@ -252,7 +259,8 @@ def _write_run_files(cfg: TrainConfig, run_dir: Path, command: list[str] | None)
 def _make_logger(run_dir: Path):
     """SB3's logger writing progress.csv into the run folder and TensorBoard into tb/; a
     resumed run moves the earlier progress.csv aside (progress.1.csv, ...) instead of
-    overwriting it."""
+    overwriting it.
+    """
     # here, not above: SB3 and torch take seconds to import
     from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoardOutputFormat
 
