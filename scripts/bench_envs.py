@@ -87,6 +87,7 @@ def time_sim(env: gym.Env, actions: np.ndarray, seconds: float) -> float:
 
 
 def main() -> None:
+    """Time every case and print the results (and write them as JSON with ``--json``)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=2.0, help="wall-clock seconds per case")
     parser.add_argument("--json", help="also write the results to this JSON file")

@@ -49,6 +49,7 @@ def make(medium: str, method: str, N: int) -> tuple[Simulator, np.ndarray, np.nd
 
 
 def run(medium: str, method: str, N: int, chunk: int, seconds: float) -> dict:
+    """Time ``sim.advance(chunk, ...)`` for about ``seconds`` of wall time; returns one result row."""
     sim, u_k, u_l = make(medium, method, N)
     period = len(u_k)
     sim.advance(1, u_k[0], u_l[0])  # compile / load the cache outside the timing
@@ -77,6 +78,7 @@ def run(medium: str, method: str, N: int, chunk: int, seconds: float) -> dict:
 
 
 def main() -> None:
+    """Time every (medium, method, N) case and print the results (and write them as JSON with ``--json``)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=1.0, help="timing per case [s]")
     parser.add_argument("--json", help="also write the results to this JSON file")

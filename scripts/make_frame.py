@@ -20,6 +20,7 @@ OUT = Path(__file__).resolve().parents[1] / "docs" / "img" / "softeel_frame.png"
 
 
 def main(seconds: float = 2.0, alpha: float = math.pi / 4, omega: float = math.pi) -> Path:
+    """Render SoftEel-v0 after ``seconds`` of the serpenoid gait and save the frame; returns its path."""
     env = gym.make(
         "SoftEel-v0",
         render_mode="rgb_array",

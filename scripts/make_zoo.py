@@ -42,12 +42,14 @@ STAGES = {
 
 
 def soft_snake(*args: str) -> None:
+    """Run ``soft-snake`` with ``args`` (echoing the command), raising if it fails."""
     cmd = [sys.executable, "-m", "soft_snake_gym.cli", *args]
     print("$", " ".join(["soft-snake", *args]), flush=True)
     subprocess.run(cmd, check=True)
 
 
 def main() -> None:
+    """Train the zoo agents (unless ``--skip-training``), copy their best models into the zoo, compare."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", default="runs", help="folder of the run folders (default runs/)")
     parser.add_argument("--skip-training", action="store_true", help="use the existing run folders")

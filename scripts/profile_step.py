@@ -85,6 +85,7 @@ def _us(fn, *args, k=20000) -> float:
 
 
 def newton_iterations(actions: str, robots: int = 64, steps: int = 300) -> np.ndarray:
+    """Fraction of robot steps taking 0, 1, 2, ... Newton iterations, under random or gait actions."""
     venv = gym.make_vec("SoftEel-v0", num_envs=robots, num_threads=1)
     venv.reset(seed=0)
     if actions == "random":
@@ -99,6 +100,7 @@ def newton_iterations(actions: str, robots: int = 64, steps: int = 300) -> np.nd
 
 
 def main() -> None:
+    """Print the Newton-iteration histogram for random and for gait actions."""
     for kind in ("random", "gait"):
         frac = newton_iterations(kind)
         mean = float(frac @ np.arange(frac.size))

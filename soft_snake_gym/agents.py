@@ -122,6 +122,7 @@ class TrainedPolicy:
         epsilon: float = 1e-8,
         name: str = "trained",
     ) -> None:
+        """Wrap ``model`` and its observation statistics (arguments in the class docstring)."""
         self.model = model
         self.obs_rms = obs_rms
         self.clip_obs = clip_obs
@@ -147,6 +148,7 @@ class TrainedPolicy:
         )
 
     def __repr__(self) -> str:
+        """``TrainedPolicy(name)``."""
         return f"TrainedPolicy({self.name})"
 
 
@@ -192,8 +194,9 @@ def _find_model(path: Path) -> tuple[Path, Path | None]:
 
 
 def load_trained(path: str | Path, env: Any) -> TrainedPolicy:
-    """Load a trained agent from a run folder or a model zip (with the VecNormalize
-    statistics saved beside it) as a :class:`TrainedPolicy`.
+    """Load a trained agent as a :class:`TrainedPolicy`.
+
+    From a run folder or a model zip (with the VecNormalize statistics saved beside it).
 
     Raises:
         ConfigError: nothing loadable at ``path``.

@@ -105,8 +105,10 @@ class _VectorCase:
 
 
 def _gait_actions(robots: int, n: int = 8, steps: int = 300) -> np.ndarray:
-    """The thesis serpenoid (alpha = pi/6, omega = 2 pi/3) as normalized SoftEel-v0 actions
-    of ``robots`` eels of ``n + 2`` nodes, (steps, robots, n) float32.
+    """The thesis serpenoid as normalized SoftEel-v0 actions, (steps, robots, n) float32.
+
+    The serpenoid has alpha = pi/6, omega = 2 pi/3; the actions are those of ``robots`` eels of
+    ``n + 2`` nodes.
     """
     alpha, omega = (math.pi / 6) * 8 / n, 2 * math.pi / 3  # the same body shape at any n
     t = (np.arange(steps) + 0.5) * 0.01
@@ -155,8 +157,9 @@ def _ppo_settings(env_id: str) -> tuple[int, dict[str, Any], dict[str, Any]]:
 
 
 def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict[str, Any]:
-    """``model.learn`` environment steps per second with the batched env or ``SubprocVecEnv``
-    (after one warm-up rollout and update), at the package's PPO settings for ``env_id``.
+    """``model.learn`` environment steps per second with the batched env or ``SubprocVecEnv``.
+
+    Measured after one warm-up rollout and update, at the package's PPO settings for ``env_id``.
     """
     import torch
     from stable_baselines3 import PPO

@@ -54,8 +54,10 @@ class ConfigError(ValueError):
 
 
 class _Loader(yaml.SafeLoader):
-    """SafeLoader that also reads ``1e6`` and ``2e-3`` as floats (YAML 1.1 wants ``1.0e+6``)
-    and refuses a key given twice in one mapping (PyYAML would keep the last silently).
+    """SafeLoader that reads ``1e6`` as a float and refuses duplicate keys.
+
+    It reads ``1e6`` and ``2e-3`` as floats (YAML 1.1 wants ``1.0e+6``) and refuses a key given
+    twice in one mapping (PyYAML would keep the last silently).
     """
 
     def construct_mapping(self, node, deep=False):
@@ -209,9 +211,10 @@ def from_dict(cls: type[T], data: Any, where: str | None = None) -> T:
 
 
 def _with_range(cls: type, key: str, value: Any, where: str) -> str | None:
-    """The dataclass's own message for a value of the wrong type, which names the allowed
-    range (``Rod.E = 'abc' must be a number in (0.0, inf)``), under the name ``where.key``;
-    None if the class has no check of its own for ``key``.
+    """The dataclass's own message for a value of the wrong type, under the name ``where.key``.
+
+    The message names the allowed range (``Rod.E = 'abc' must be a number in (0.0, inf)``); None if
+    the class has no check of its own for ``key``.
     """
     try:
         cls(**{key: value})
@@ -229,9 +232,10 @@ def to_dict(obj: Any) -> dict[str, Any]:
 
 
 def load_sim_config(path: str | Path) -> SimConfig:
-    """Load a :class:`SimConfig` from a YAML file (sections rod, medium, fluid, ground,
-    integrator; any may be left out for its default; a ``preset`` key lays that preset beneath
-    the file's sections, see :func:`with_preset`).
+    """Load a :class:`SimConfig` from a YAML file.
+
+    Sections rod, medium, fluid, ground, integrator; any may be left out for its default; a
+    ``preset`` key lays that preset beneath the file's sections, see :func:`with_preset`.
     """
     where = Path(path).name
     return from_dict(SimConfig, with_preset(load_yaml(path), where), where=where)

@@ -84,6 +84,7 @@ class Metric:
     key: str = ""
 
     def __post_init__(self) -> None:
+        """Default ``key`` to ``name``."""
         if not self.key:
             object.__setattr__(self, "key", self.name)
 
@@ -207,12 +208,14 @@ class EpisodeRecorder:
     def __init__(
         self, dt: float, transient: float, error_key: str, on_step: Callable[[int, dict], None] | None = None
     ) -> None:
+        """Start with no episodes recorded (arguments in the class docstring)."""
         self.dt, self.transient, self.error_key = dt, transient, error_key
         self.on_step = on_step
         self.episodes: list[dict[str, Any]] = []
         self._run: dict[int, _Running] = {}
 
     def __call__(self, locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
+        """Record one env's step from ``evaluate_policy``'s locals; a finished episode adds its metrics."""
         i, info, done = locals_["i"], locals_["info"], bool(locals_["done"])
         policy = locals_["model"]
         run = self._run.setdefault(i, _Running())
@@ -289,8 +292,9 @@ def evaluate(
     deterministic: bool = True,
     video: str | Path | None = None,
 ) -> list[dict[str, Any]]:
-    """Run ``episodes`` episodes of ``policy`` on the VecEnv ``env`` (see
-    :func:`make_eval_env`) with SB3's ``evaluate_policy``; returns one metrics dict per episode.
+    """Run ``episodes`` episodes of ``policy`` with SB3's ``evaluate_policy``.
+
+    On the VecEnv ``env`` (see :func:`make_eval_env`); returns one metrics dict per episode.
 
     Args:
         policy: anything with SB3's ``predict`` (a baseline or a trained model).
@@ -365,9 +369,10 @@ def check_video_path(path: str | Path) -> None:
 
 
 def check_transient(transient: float, duration: float) -> None:
-    """Raise ``ValueError`` unless ``transient`` [s] leaves an averaging window in an episode of
-    ``duration`` [s]: speed and error are averaged after the transient only when the episode
-    lasts at least twice as long (otherwise over the whole episode).
+    """Raise ``ValueError`` unless ``transient`` [s] leaves an averaging window in the episode.
+
+    The episode lasts ``duration`` [s]. Speed and error are averaged after the transient only when
+    the episode lasts at least twice as long (otherwise over the whole episode).
     """
     if not (isinstance(transient, (int, float)) and math.isfinite(transient) and transient >= 0):
         raise ValueError(f"transient = {transient!r} s must be a finite number >= 0")
@@ -379,9 +384,10 @@ def check_transient(transient: float, duration: float) -> None:
 
 
 def gait_rate_warning(policy: Any, env: Any) -> str | None:
-    """A warning if a baseline's gait asks for input rates beyond the env's action scale
-    (``max_curvature_rate`` or ``max_length_rate``): the actions saturate and the gait is not
-    the one named. None when the gait fits or the policy has no gait (a trained agent).
+    """A warning if a baseline's gait asks for input rates beyond the env's action scale.
+
+    The scale is ``max_curvature_rate`` or ``max_length_rate``: the actions saturate and the gait is
+    not the one named. None when the gait fits or the policy has no gait (a trained agent).
     """
     params = getattr(policy, "params", None)
     inner = env.envs[0].unwrapped if hasattr(env, "envs") else getattr(env, "unwrapped", env)

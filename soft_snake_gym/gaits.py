@@ -55,6 +55,7 @@ class SerpenoidParams:
     psi0: float = 0.0
 
     def __post_init__(self) -> None:
+        """Check that ``alpha`` is in [0, pi) and ``omega >= 0``."""
         if not 0 <= self.alpha < math.pi:
             raise ValueError(f"alpha = {self.alpha!r} rad must be in [0, pi)")
         if not self.omega >= 0:
@@ -108,8 +109,9 @@ def serpenoid(
 
 
 def max_serpenoid_amplitude(n_nodes: int, delta: float, gamma: float = 0.0) -> float:
-    """Largest ``alpha`` (bisection, 1e-4 rad) whose serpenoid body with equal edges does not
-    self-intersect at any phase (docs/model.md §6).
+    """Largest ``alpha`` whose serpenoid body does not self-intersect at any phase.
+
+    By bisection to 1e-4 rad, for the body with equal edges (docs/model.md §6).
     """
     lbar = np.ones(n_nodes - 1)
 

@@ -29,9 +29,10 @@ Medium = Literal["water", "ground", "none"]
 
 
 def plain_number(value: Any, integer: bool = False) -> int | float | None:
-    """``value`` as a Python ``int`` or ``float`` if it is a real number (including numpy
-    scalars such as ``np.int64`` and ``np.float32``), else None. Booleans are not numbers.
-    With ``integer``, only integers (Python or numpy) qualify.
+    """``value`` as a Python ``int`` or ``float`` if it is a real number, else None.
+
+    Real numbers include numpy scalars such as ``np.int64`` and ``np.float32``. Booleans are not
+    numbers. With ``integer``, only integers (Python or numpy) qualify.
 
     Frozen configs keep the Python number, so they stay hashable and YAML-dumpable.
     """
@@ -171,6 +172,7 @@ class Rod:
     refine: InitVar[int | None] = None
 
     def __post_init__(self, damping: float | None, refine: int | None) -> None:
+        """Check the values, reject the removed ``damping`` and apply ``refine``."""
         if damping is not None:
             raise ValueError(
                 f"Rod.damping = {damping!r} is no longer a parameter: it was split into "
@@ -283,6 +285,7 @@ class Fluid:
     added_mass: Literal["consistent", "kelasidi"] = "consistent"
 
     def __post_init__(self) -> None:
+        """Check ``added_mass`` and the values."""
         if self.added_mass not in ("consistent", "kelasidi"):
             raise ValueError(
                 f"Fluid.added_mass = {self.added_mass!r} is unknown; use 'consistent' "
@@ -326,6 +329,7 @@ class Ground:
     mu_lateral: float | None = None
 
     def __post_init__(self) -> None:
+        """Check the values (``mu_d <= mu_s`` among them)."""
         _check(self, "mu_s", 0.0, None)
         _check(self, "mu_d", 0.0, None)
         _check(self, "V_tol", 0.0, None, lo_open=True)
@@ -380,6 +384,7 @@ class Integrator:
     check_self_intersection: bool = True
 
     def __post_init__(self) -> None:
+        """Check ``method`` and the values."""
         if self.method not in ("backward_euler", "symplectic_euler"):
             raise ValueError(
                 f"Integrator.method = {self.method!r} is unknown; use 'backward_euler' or 'symplectic_euler'"
@@ -411,6 +416,7 @@ class SimConfig:
     integrator: Integrator = Integrator()
 
     def __post_init__(self) -> None:
+        """Check ``medium`` and the types of the sections."""
         if self.medium not in ("water", "ground", "none"):
             raise ValueError(
                 f"SimConfig.medium = {self.medium!r} is unknown; use 'water', 'ground' or 'none'"

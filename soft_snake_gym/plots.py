@@ -75,8 +75,9 @@ def cell_edges(values: np.ndarray) -> np.ndarray:
 
 
 def sweep_heatmaps(study: Any, rows: list[dict[str, Any]], out_dir: str | Path) -> list[Path]:
-    """One PNG per metric of ``study`` (a :class:`~soft_snake_gym.studies.sweep.Study`), one
-    panel per controller (or per bending modulus), cells annotated with their values.
+    """One PNG per metric of ``study`` (a :class:`~soft_snake_gym.studies.sweep.Study`).
+
+    One panel per controller (or per bending modulus), cells annotated with their values.
     """
     out_dir = Path(out_dir)
     if not rows:
@@ -143,8 +144,9 @@ def sweep_heatmaps(study: Any, rows: list[dict[str, Any]], out_dir: str | Path) 
 def swim_snapshots(
     trajectory: dict[str, np.ndarray], out: str | Path, title: str, snapshots: int = 12
 ) -> Path:
-    """Body snapshots over a stretch of a swimming trajectory, coloured by time, with the head,
-    tail and centre-of-mass traces.
+    """Body snapshots over a stretch of a swimming trajectory, coloured by time.
+
+    With the head, tail and centre-of-mass traces.
 
     Args:
         trajectory: ``t`` (T,) [s], ``x`` (T, N, 2) [m], ``com`` (T, 2) [m] of the stretch.
@@ -285,8 +287,9 @@ def comparison_chart(
 
 
 def benchmark_chart(res: dict[str, Any], path: str | Path) -> Path:
-    """Throughput bars (log scale) and cost per robot step against N, from
-    :func:`soft_snake_gym.benchmark.run_benchmark`'s result, as a PNG.
+    """Throughput bars (log scale) and cost per robot step against N, as a PNG.
+
+    From :func:`soft_snake_gym.benchmark.run_benchmark`'s result.
     """
     fig = _figure(figsize=(12, 4.8))
     ax1, ax2 = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.6, 1]})

@@ -62,6 +62,7 @@ class SoftVecEnv(VecEnv):
         step_info: bool = False,
         **env_kwargs: Any,
     ) -> None:
+        """Build the batched env of ``n_envs`` robots (arguments in the class docstring)."""
         self.venv = SoftVectorEnv(
             env_id,
             n_envs,
@@ -80,6 +81,7 @@ class SoftVecEnv(VecEnv):
 
     # --- VecEnv API ------------------------------------------------------------------------------
     def reset(self) -> np.ndarray:
+        """Reset every robot (with the seeds and options set before) and return the observations."""
         venv = self.venv
         self.reset_infos = venv.reset_robots(self._seeds, [options or None for options in self._options])
         self._reset_seeds()
@@ -87,9 +89,11 @@ class SoftVecEnv(VecEnv):
         return venv.obs.copy()
 
     def step_async(self, actions: np.ndarray) -> None:
+        """Store the actions for :meth:`step_wait`."""
         self._actions = actions
 
     def step_wait(self):
+        """Step every robot (resetting those that end); returns SB3's (obs, rewards, dones, infos)."""
         venv = self.venv
         if venv.needs_reset:
             raise RuntimeError(f"{self.env_id} SoftVecEnv: call reset() before step()")
@@ -118,18 +122,22 @@ class SoftVecEnv(VecEnv):
         return venv.obs.copy(), rewards, dones, infos
 
     def close(self) -> None:
+        """Close the batched env."""
         self.venv.close()
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        """Attribute ``attr_name`` of the env objects of the robots in ``indices``."""
         return [getattr(self.venv.envs[i], attr_name) for i in self._indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        """Set attribute ``attr_name`` to ``value`` on the env objects of the robots in ``indices``."""
         for i in self._indices(indices):
             setattr(self.venv.envs[i], attr_name, value)
 
     def env_method(
         self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs
     ) -> list[Any]:
+        """Call ``method_name`` on the env objects of the robots in ``indices``; returns the results."""
         return [
             getattr(self.venv.envs[i], method_name)(*method_args, **method_kwargs)
             for i in self._indices(indices)
@@ -146,6 +154,7 @@ class SoftVecEnv(VecEnv):
         return [wrapper_class is Monitor for _ in self._indices(indices)]
 
     def get_images(self) -> Sequence[np.ndarray | None]:
+        """``None`` per robot: the batched env does not render."""
         return [None for _ in range(self.num_envs)]
 
     def _indices(self, indices: VecEnvIndices) -> Iterable[int]:

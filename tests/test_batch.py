@@ -1,5 +1,6 @@
-"""The one batched loop (``task.batch_step`` under the vector env) steps every robot exactly as a
-lone simulator would, over the public :class:`RobotBatch`.
+"""The one batched loop steps every robot exactly as a lone simulator would.
+
+The loop is ``task.batch_step`` under the vector env, tested over the public :class:`RobotBatch`.
 """
 
 from __future__ import annotations

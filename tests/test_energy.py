@@ -18,7 +18,8 @@ NO_DRAG = {"C_f": 0.0, "C_D": 0.0}  # water that stores energy but dissipates no
 
 
 def released(added_mass: str, method: str, substeps: int | None, T: float = 1.0, spin: float = 0.0):
-    """A bent body (rest shape straight) released in drag-free water, no input, no damping;
+    """A bent body (rest shape straight) released in drag-free water, no input, no damping.
+
     ``spin`` [rad/s] adds a rigid rotation so that the edges turn from the start. Returns the
     simulator and the energies body + ``T_f`` and body alone after every step.
     """
@@ -81,8 +82,10 @@ def test_kelasidi_form_creates_energy_whatever_the_step():
 
 
 def _gait_ledger(substeps: int, added_mass: str = "consistent", damping: float = 0.0, T: float = 2.0):
-    """The ledger of an open-loop serpenoid (alpha = pi/6, omega = 2 pi/3, delta = pi/4) from a
-    straight body at rest, backward Euler with ``substeps`` internal steps.
+    """The ledger of an open-loop serpenoid from a straight body at rest.
+
+    The serpenoid has alpha = pi/6, omega = 2 pi/3, delta = pi/4; backward Euler with ``substeps``
+    internal steps.
     """
     sim = Simulator(
         SimConfig(
@@ -191,8 +194,9 @@ def test_consistent_form_newton_converges_in_few_iterations():
 
 
 def _env_ledger(substeps: int) -> dict[str, float]:
-    """``info["energy"]`` after 1.5 s of the open-loop baseline from a straight body (its
-    start, which pulls the rest shape onto the gait within a few steps, is a hard transient).
+    """``info["energy"]`` after 1.5 s of the open-loop baseline from a straight body.
+
+    Its start, which pulls the rest shape onto the gait within a few steps, is a hard transient.
     """
     import gymnasium as gym
 

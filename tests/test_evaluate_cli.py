@@ -173,8 +173,9 @@ def test_every_command_is_a_module_of_the_cli_package():
 
 
 def test_evaluate_start_on_gait_takes_the_gait_from_the_policy(capsys, tmp_path):
-    """From rest on the policy's gait the PID's curvature error at t = 0 is zero; from the
-    straight start it is the gait's own size (|kappa_des| up to 2 tan(pi/6) = 1.15).
+    """From rest on the policy's gait the PID's curvature error at t = 0 is zero.
+
+    From the straight start it is the gait's own size (|kappa_des| up to 2 tan(pi/6) = 1.15).
     """
     errors = {}
     for start in (True, False):

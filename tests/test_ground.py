@@ -169,9 +169,10 @@ def test_anisotropic_kinetic_friction_depends_on_the_sliding_direction(method, d
 
 
 def test_backward_friction_lets_a_symmetric_wave_move_the_worm_forward():
-    """Setae-like anisotropy (sliding toward the tail costs more than toward the head) turns a
-    wave that moves an isotropic worm almost nowhere into forward motion, whichever way the
-    wave travels.
+    """Setae-like anisotropy turns a wave that barely moves an isotropic worm into forward motion.
+
+    Setae-like: sliding toward the tail costs more than toward the head. The isotropic worm moves
+    almost nowhere; the anisotropic one moves forward whichever way the wave travels.
     """
     iso, _ = inch(-1)
     setae = Ground(mu_forward=0.3, mu_backward=1.1)

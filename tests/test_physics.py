@@ -314,8 +314,9 @@ def test_extreme_resolutions_step(N):
 
 
 def test_explicit_substeps_keep_material_damping_stable():
-    """Explicit Kelvin-Voigt damping is stable only while the sub-step is shorter than the
-    fastest damping time: on short, light edges that limit, not the elastic one, sets the
+    """Explicit Kelvin-Voigt damping is stable only while the sub-step is shorter than the damping time.
+
+    That is the fastest damping time: on short, light edges that limit, not the elastic one, sets the
     sub-steps (docs/model.md §5a).
     """
     rod = Rod(N=30, edge_length=1.62 / 29, edge_mass=7.2 / 29, damping_bend=1.0, damping_stretch=5.0)

@@ -88,8 +88,10 @@ def test_gait_mapping_is_the_identity_on_the_design_robot_and_scales_with_the_ed
 
 
 def test_controllers_command_the_same_wave_on_arc_length():
-    """At equal arc length s and time t, the refined robot's controllers ask for the same
-    turning angle per metre (serpenoid) and the same strain (length wave) as the design's.
+    """At equal arc length and time, the refined robot's controllers ask for the design's targets.
+
+    At equal arc length s and time t, they ask for the same turning angle per metre (serpenoid) and
+    the same strain (length wave) as the design's.
     """
     t = np.array([0.37, 1.9])
     phi = {}
@@ -156,8 +158,10 @@ def test_refined_damping_relaxes_at_the_continuum_rate(kind):
 
 
 def _episode(N: int, policy, seconds: float = 6.0, window: float = 3.0) -> tuple[float, float]:
-    """Speed [m/s] and mean fluid power [W] over the last ``window`` s (one gait period) of an
-    episode of the thesis robot refined to N nodes, started at rest on the gait's shape.
+    """Speed [m/s] and mean fluid power [W] over the last ``window`` s of an episode.
+
+    ``window`` is one gait period; the episode is of the thesis robot refined to N nodes, started at
+    rest on the gait's shape.
     """
     env = gym.make(
         "SoftEel-v0",

@@ -13,8 +13,9 @@ from soft_snake_gym.studies.reproduce import HEADLINE_MODELS, headline_case, hea
 
 @pytest.fixture(scope="module")
 def short_headline(request):
-    """A short headline case (one amplitude, 1 s window after a 1.5 s transient) with the
-    physics each robot ran on, recorded through the eval env factory.
+    """A short headline case with the physics each robot ran on, recorded through the eval env factory.
+
+    One amplitude, 1 s window after a 1.5 s transient.
     """
     import soft_snake_gym.studies.reproduce as reproduce
 

@@ -243,8 +243,9 @@ def test_returned_arrays_are_not_the_env_buffers():
 
 # --- Stable-Baselines3 ---------------------------------------------------------------------------
 def test_sb3_adapter_matches_dummy_vec_env_of_single_envs():
-    """SoftVecEnv is bitwise SB3's DummyVecEnv over Monitor-wrapped single envs (make_vec_env),
-    terminal observations and time-limit flags included.
+    """SoftVecEnv is bitwise SB3's DummyVecEnv over Monitor-wrapped single envs (make_vec_env).
+
+    Terminal observations and time-limit flags included.
     """
     from stable_baselines3.common.env_util import make_vec_env
 

@@ -35,6 +35,7 @@ class Parser(argparse.ArgumentParser):
     """argparse, but a usage error is one line on stderr (exit code 2)."""
 
     def error(self, message: str):
+        """Exit with code 2 and a one-line usage error on stderr."""
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 

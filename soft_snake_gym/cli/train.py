@@ -50,8 +50,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _step_plan(cfg: TrainConfig, start: int) -> str:
-    """``for 4,096 steps (3,000 rounded up to whole rollouts of 512 x 8 steps)``, and where the
-    checkpoints land when ``n_envs`` does not divide ``checkpoint_freq``.
+    """The planned steps as text, and where the checkpoints land.
+
+    For example ``for 4,096 steps (3,000 rounded up to whole rollouts of 512 x 8 steps)``; the
+    checkpoints are mentioned when ``n_envs`` does not divide ``checkpoint_freq``.
     """
     end = planned_steps(cfg, start)
     chunk = steps_per_iteration(cfg)

@@ -83,6 +83,7 @@ class Randomization:
     }
 
     def __post_init__(self) -> None:
+        """Check that each given range is a valid pair [low, high] of finite numbers; store it as a tuple."""
         for f in dataclasses.fields(self):
             rng = getattr(self, f.name)
             if rng is None:
@@ -130,8 +131,10 @@ class Randomization:
         return config, drawn
 
     def check(self, medium: str, ground: Ground, where: str) -> None:
-        """Raise ``ConfigError`` if a randomized parameter has no effect in ``medium`` or if
-        a draw could give ``mu_d > mu_s`` (with ``ground`` the values not randomized).
+        """Raise ``ConfigError`` if a randomized parameter is useless or could give ``mu_d > mu_s``.
+
+        Useless: it has no effect in ``medium``. The ``mu_d > mu_s`` check takes ``ground`` for the
+        values not randomized.
         """
         unused = {"water": "ground", "ground": "fluid"}.get(medium)
         useless = [
@@ -178,6 +181,7 @@ class BaseSettings:
     randomize: Randomization = field(default_factory=Randomization)
 
     def __post_init__(self) -> None:
+        """Make numpy scalars Python numbers; check the values (``dt`` a multiple of ``integrator.h``)."""
         cls = type(self).__name__
         for f in dataclasses.fields(self):  # numpy scalars become Python numbers
             number = plain_number(getattr(self, f.name))
@@ -201,8 +205,9 @@ class BaseSettings:
 def resolve_settings(
     settings_cls: type, medium: str, config: str | Path | None, kwargs: dict, label: str | None = None
 ) -> Any:
-    """Settings from a named preset, a YAML file of constructor keywords and explicit
-    keywords, each overriding the one before.
+    """Settings from a preset, a YAML file and explicit keywords, each overriding the one before.
+
+    The preset is named, and the YAML file holds constructor keywords.
 
     A ``medium`` key in the file (as in the shipped ``eel`` config) is accepted if it names this
     environment's medium. A ``preset`` key (in the file or the keywords) lays that preset's
@@ -273,6 +278,7 @@ class SoftRobotEnv(gym.Env):
     trail_length: ClassVar[int] = 300
 
     def __init__(self, render_mode: str | None = None, config: str | Path | None = None, **kwargs: Any):
+        """Build the env from a preset, a YAML ``config`` and keywords (see the env's docstring)."""
         settings = resolve_settings(self.settings_class, self.medium, config, kwargs, self.env_id)
         self._setup(settings, render_mode)
         n = self.sim.substeps
@@ -380,8 +386,10 @@ class SoftRobotEnv(gym.Env):
         raise NotImplementedError
 
     def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
-        """The body's entries of ``info`` from the unclipped observation ``raw`` and the driven
-        rest shape ``shape`` (new arrays); (n_obs,) for one robot or (n, n_obs) for a batch.
+        """The body's entries of ``info`` (new arrays).
+
+        From the unclipped observation ``raw`` and the driven rest shape ``shape``; (n_obs,) for one
+        robot or (n, n_obs) for a batch.
         """
         raise NotImplementedError
 
@@ -577,11 +585,13 @@ class SoftRobotEnv(gym.Env):
         self._failure = self.sim.failure = reason
 
     def close(self) -> None:
+        """Close the renderer, if any."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
 
     def __getstate__(self) -> dict[str, Any]:
+        """The env's state for pickling, without the renderer (figures do not pickle)."""
         state = self.__dict__.copy()
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
         return state

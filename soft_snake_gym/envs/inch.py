@@ -27,6 +27,7 @@ class InchSettings(BaseSettings):
     energy_source: Literal["friction", "actuator"] = "friction"
 
     def __post_init__(self) -> None:
+        """Check the settings of :class:`InchEnv` on top of the shared ones."""
         super().__post_init__()
         check_number("InchSettings.max_length_rate", self.max_length_rate, 0.0, lo_open=True)
         lim = tuple(self.rest_length_limits)
@@ -162,6 +163,7 @@ class InchEnv(SoftRobotEnv):
     shape_key = "lbar"
 
     def __init__(self, render_mode: str | None = None, config: Any = None, **kwargs: Any):
+        """Build ``SoftWorm-v0`` (keywords in the class docstring)."""
         super().__init__(render_mode=render_mode, config=config, **kwargs)
 
     def _setup_task(self) -> None:

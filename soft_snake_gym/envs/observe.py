@@ -55,8 +55,9 @@ def scale_rates(action, scale, value, lo, hi, dt, out):
 
 @njit(cache=True)
 def body_velocity(q, v, w):
-    """Heading of the tail-to-head chord [rad] and the centre-of-mass velocity along it and to
-    its left [m/s]; ``w`` (N,) are the mass fractions.
+    """Heading of the tail-to-head chord [rad] and the centre-of-mass velocity along it and to its left.
+
+    The velocities are in [m/s]; ``w`` (N,) are the mass fractions.
     """
     n = w.size
     vx = 0.0

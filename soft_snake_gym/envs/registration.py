@@ -26,8 +26,9 @@ VECTOR_ENTRY_POINTS = {
 
 
 def register_envs() -> None:
-    """Register ``SoftEel-v0`` and ``SoftWorm-v0`` (1000 steps each, with their batched vector
-    entry points) unless already registered.
+    """Register ``SoftEel-v0`` and ``SoftWorm-v0`` unless already registered.
+
+    1000 steps each, with their batched vector entry points.
     """
     for env_id, entry_point in ENV_IDS.items():
         if env_id not in gym.registry:

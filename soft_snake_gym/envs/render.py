@@ -55,6 +55,7 @@ class BodyRenderer:
         fps: int = 100,
         size: tuple[int, int] = (480, 360),
     ) -> None:
+        """Build the figure (arguments in the class docstring)."""
         from matplotlib.figure import Figure
 
         self.human = human
@@ -135,8 +136,9 @@ class BodyRenderer:
 
         Args:
             x: node positions, (N, 2) [m].
-            trail_com, trail_head: recent centre-of-mass and head positions, (T, 2) [m]; the last
-                row of ``trail_com`` is the current centre of mass.
+            trail_com: recent centre-of-mass positions, (T, 2) [m]; the last row is the current
+                centre of mass.
+            trail_head: recent head positions, (T, 2) [m].
             time: simulated time [s].
             goal: unit goal direction, (2,).
             title: shown next to the time.

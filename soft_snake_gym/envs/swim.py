@@ -37,6 +37,7 @@ class SwimSettings(BaseSettings):
     start_on_gait: SerpenoidParams | None = None
 
     def __post_init__(self) -> None:
+        """Check the settings of :class:`SwimEnv` on top of the shared ones."""
         super().__post_init__()
         for name in ("max_curvature_rate", "max_rest_curvature"):
             check_number(f"SwimSettings.{name}", getattr(self, name), 0.0, lo_open=True)
@@ -209,6 +210,7 @@ class SwimEnv(SoftRobotEnv):
     medium_energy_key = "energy_fluid"
 
     def __init__(self, render_mode: str | None = None, config: Any = None, **kwargs: Any):
+        """Build ``SoftEel-v0`` (keywords in the class docstring)."""
         super().__init__(render_mode=render_mode, config=config, **kwargs)
 
     def _setup_task(self) -> None:

@@ -162,8 +162,9 @@ def allocate_task(N: int, n_act: int, n_obs: int, batch: tuple[int, ...] = ()) -
 
 
 def reward_terms(r: Any) -> dict[str, Any]:
-    """The forward speed [m/s] and the reward terms of the last step, by name, from ``rs``
-    (a list for one robot, or ``rs.T``, rows over robots, for a batch).
+    """The forward speed [m/s] and the reward terms of the last step, by name, from ``rs``.
+
+    ``rs`` is a list for one robot, or ``rs.T``, rows over robots, for a batch.
     """
     terms = {"forward_speed": r[R_FWD]}
     terms.update(zip(TERM_KEYS, r[R_RF : R_RFAIL + 1], strict=True))
@@ -171,8 +172,9 @@ def reward_terms(r: Any) -> dict[str, Any]:
 
 
 def episode_metrics(r: Any, keys: tuple[str, ...]) -> dict[str, Any]:
-    """The running episode metrics (docs/model.md §8) by name, from ``rs`` as for
-    :func:`reward_terms`; ``keys`` are :data:`METRIC_KEYS` with the medium's energy named.
+    """The running episode metrics (docs/model.md §8) by name, from ``rs`` as for :func:`reward_terms`.
+
+    ``keys`` are :data:`METRIC_KEYS` with the medium's energy named.
     """
     return dict(zip(keys, r[M_AVG:], strict=True))
 
@@ -235,10 +237,12 @@ def robot_reset(s, t):
 
 @njit(cache=True, error_model="numpy")
 def robot_step(s, t):
-    """One control step of one robot, its simulator's arrays ``s``
-    (:class:`~soft_snake_gym.physics.SimArrays`) and its task's ``t`` (:class:`TaskArrays`,
-    with the action in ``t.act``). Returns the status (``OK``, a failure code, or
-    :data:`BAD_ACTION` if the action has a non-finite entry, in which case nothing changes).
+    """One control step of one robot; returns the status.
+
+    The robot is its simulator's arrays ``s`` (:class:`~soft_snake_gym.physics.SimArrays`) and its
+    task's ``t`` (:class:`TaskArrays`, with the action in ``t.act``). The status is ``OK``, a
+    failure code, or :data:`BAD_ACTION` if the action has a non-finite entry, in which case nothing
+    changes.
 
     Clips ``act`` to [-1, 1] and turns it into rates (curvature rates for a swimmer, length
     rates for an inchworm) cut at the rest-shape bounds; advances ``tp[T_NSUB]`` integrator
@@ -307,9 +311,10 @@ def _robot(s, t, i):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def batch_step(active, s, t, status):
-    """:func:`robot_step` for every robot ``i`` with ``active[i]``, of stacked simulator arrays
-    ``s`` and task arrays ``t`` (leading robot axis), spread over numba's threads; robot ``i``'s
-    status into ``status[i]``.
+    """:func:`robot_step` for every active robot, spread over numba's threads.
+
+    For every robot ``i`` with ``active[i]``, of stacked simulator arrays ``s`` and task arrays
+    ``t`` (leading robot axis); robot ``i``'s status into ``status[i]``.
     """
     s, t = SimArrays(*s), TaskArrays(*t)
     for i in prange(status.size):

@@ -123,6 +123,7 @@ class SoftVectorEnv(VectorEnv):
         config: Any = None,
         **kwargs: Any,
     ) -> None:
+        """Build ``num_envs`` robots of ``env_id`` (arguments in the class docstring)."""
         env_id = env_id or self.env_id
         if env_id not in ENV_CLASSES:
             raise ValueError(f"env_id = {env_id!r} has no batched version; use one of {list(ENV_CLASSES)}")
@@ -254,6 +255,7 @@ class SoftVectorEnv(VectorEnv):
         return self.obs.copy(), rewards, terminated, truncated, infos
 
     def close_extras(self, **kwargs: Any) -> None:
+        """Close every robot's env object."""
         for env in self.envs:
             env.close()
 
@@ -277,9 +279,10 @@ class SoftVectorEnv(VectorEnv):
         return self._needs_reset
 
     def advance(self, actions, stepping: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Step the robots in ``stepping`` (n,) bool by ``actions`` (n, n_act) in one compiled
-        call and update their episode counters; a robot whose step fails ends its episode
-        (its env's ``failure``). Resets nobody: see :meth:`reset_robot`.
+        """Step the robots in ``stepping`` in one compiled call and update their episode counters.
+
+        ``stepping`` is (n,) bool and ``actions`` (n, n_act). A robot whose step fails ends its
+        episode (its env's ``failure``). Resets nobody: see :meth:`reset_robot`.
 
         Returns:
             (terminated, truncated), (n,) bool each, False for robots not stepped.
@@ -336,8 +339,9 @@ class SoftVectorEnv(VectorEnv):
         return terminated, truncated
 
     def reset_robot(self, i: int, seed: int | None = None, options: dict[str, Any] | None = None) -> dict:
-        """Reset robot ``i`` through its env object and start its episode counters; returns
-        that env's reset info.
+        """Reset robot ``i`` through its env object and start its episode counters.
+
+        Returns that env's reset info.
         """
         _, info = self.envs[i].reset(seed=seed, options=options)
         self._elapsed[i] = 0
@@ -360,7 +364,8 @@ class SoftVectorEnv(VectorEnv):
         return T.episode_metrics(self.batch.task.rs[i].tolist(), self.metric_keys)
 
     def episode_stats(self, dones: np.ndarray) -> dict[str, np.ndarray]:
-        """``{"r", "l", "t"}`` (return, length, wall-clock seconds) of the episodes that end,
+        """``{"r", "l", "t"}`` (return, length, wall-clock seconds) of the episodes that end.
+
         (n,) each, zero where ``dones`` is False (as ``RecordEpisodeStatistics``).
         """
         now = time.perf_counter()
@@ -371,9 +376,10 @@ class SoftVectorEnv(VectorEnv):
         }
 
     def infos(self, stepped: np.ndarray, reset: np.ndarray, reset_infos: list[dict]) -> dict[str, Any]:
-        """Infos of robots that ``stepped`` and were ``reset`` (``reset_infos`` in robot order),
-        with Gymnasium's ``_key`` masks, as ``SyncVectorEnv`` would gather the single envs'
-        (the entries are built by the same env methods).
+        """Infos of robots that ``stepped`` and were ``reset``, with Gymnasium's ``_key`` masks.
+
+        ``reset_infos`` are in robot order. As ``SyncVectorEnv`` would gather the single envs' (the
+        entries are built by the same env methods).
         """
         n = self.num_envs
         infos: dict[str, Any] = {}
@@ -440,6 +446,7 @@ class SwimVectorEnv(SoftVectorEnv):
     env_id = "SoftEel-v0"
 
     def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        """Build ``num_envs`` SoftEel-v0 robots (keywords as for :class:`SoftVectorEnv`)."""
         super().__init__("SoftEel-v0", num_envs, **kwargs)
 
 
@@ -449,4 +456,5 @@ class InchVectorEnv(SoftVectorEnv):
     env_id = "SoftWorm-v0"
 
     def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        """Build ``num_envs`` SoftWorm-v0 robots (keywords as for :class:`SoftVectorEnv`)."""
         super().__init__("SoftWorm-v0", num_envs, **kwargs)

@@ -304,8 +304,9 @@ def added_mass(q, prm, dv, out, J, coef, apply, jac):
 
 @njit(cache=True, error_model="numpy")
 def solve_mass(q, prm, m, F, a, J, piv, water):
-    """Accelerations ``a`` from ``(M + M_A(q)) a = F`` by a banded solve (``M_A = 0`` unless
-    ``water``); ``m`` is the node mass per coordinate (2N,).
+    """Accelerations ``a`` from ``(M + M_A(q)) a = F`` by a banded solve.
+
+    ``M_A = 0`` unless ``water``; ``m`` is the node mass per coordinate (2N,).
     """
     n = q.size
     if not water:
@@ -377,8 +378,9 @@ def fluid_momentum(q, v, prm, R, sp, sg, J, dt, jac):
 
 @njit(cache=True, error_model="numpy")
 def munk_force(q, v, prm, F):
-    """Adds the velocity part of the consistent added-mass force, ``dT_f/dx - (dP_f/dx) v``
-    (the turning normal's terms, the Munk moment), to F (2N,) [N]. With it,
+    """Adds the velocity part of the consistent added-mass force to F (2N,) [N].
+
+    That part is ``dT_f/dx - (dP_f/dx) v`` (the turning normal's terms, the Munk moment). With it,
     ``(M + M_A) a = F_other + munk`` is the Lagrangian equation of ``T_f`` (docs/model.md §4).
     """
     N = q.size // 2
@@ -418,8 +420,9 @@ def fluid_kinetic_energy(q, v, prm):
 
 @njit(cache=True, error_model="numpy")
 def damping_power(q, v, prm):
-    """Power lost to material damping, ``damping_bend sum kappa_dot^2 + damping_stretch sum
-    ldot^2`` (docs/model.md §3) [W].
+    """Power lost to material damping [W].
+
+    ``damping_bend sum kappa_dot^2 + damping_stretch sum ldot^2`` (docs/model.md §3).
     """
     N = q.size // 2
     db, ds = prm[P_DBEND], prm[P_DSTRETCH]
@@ -466,8 +469,10 @@ def actuator_power(q, kbar, lbar, u_k, u_l, prm):
 
 @njit(cache=True, error_model="numpy")
 def kinetic_friction(q, v, i, fn, eps2, prm):
-    """Kinetic friction on sliding node i with normal load ``fn`` [N] (docs/model.md §5) and its
-    derivative by the node's velocity (the tangent's dependence on q is left out).
+    """Kinetic friction on sliding node i with normal load ``fn`` [N] and its velocity derivative.
+
+    See docs/model.md §5. The derivative is by the node's velocity (the tangent's dependence on q is
+    left out).
 
     Isotropic: ``-mu_d fn v / s``, ``s = sqrt(|v|^2 + eps2)`` (a smoothing far below the
     sticking speed). Anisotropic: ``-fn (mu_t v_t t + mu_lateral v_n n) / s``, with ``mu_t`` the

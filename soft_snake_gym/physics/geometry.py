@@ -40,9 +40,11 @@ def turning(q, j):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def edge_frame(q, v, i):
-    """Edge i's length ``l``, unit tangent ``t`` and normal ``n = (-t_y, t_x)``, its mean
-    velocity ``v^i = (v[i] + v[i+1]) / 2`` and that velocity's components ``v_t``, ``v_n``
-    (docs/model.md §2, §4), as (l, tx, ty, nx, ny, vx, vy, vt, vn).
+    """Edge i's length, unit tangent, normal and mean velocity, as (l, tx, ty, nx, ny, vx, vy, vt, vn).
+
+    The length is ``l``, the unit tangent ``t`` and the normal ``n = (-t_y, t_x)``; the mean
+    velocity is ``v^i = (v[i] + v[i+1]) / 2`` with components ``v_t``, ``v_n``
+    (docs/model.md §2, §4).
     """
     ex = q[2 * i + 2] - q[2 * i]
     ey = q[2 * i + 3] - q[2 * i + 1]
@@ -123,8 +125,10 @@ def _segments_cross(q, a, b):
 
 @njit(cache=True, error_model="numpy")
 def self_intersects(q, keys, order):
-    """Sweep and prune over the edges' x-extents; ``order`` (N-1,) persists between calls, so
-    the insertion sort is nearly linear for a body that moves a little each step.
+    """Sweep and prune over the edges' x-extents.
+
+    ``order`` (N-1,) persists between calls, so the insertion sort is nearly linear for a body that
+    moves a little each step.
     """
     ne = q.size // 2 - 1
     for e in range(ne):

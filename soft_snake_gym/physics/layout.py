@@ -102,8 +102,9 @@ STATUS_REASONS = (
 
 
 class SimArrays(NamedTuple):
-    """The arrays of one robot's simulation (or of ``n`` robots, stacked on a leading axis),
-    as the kernels take them. numba passes a ``NamedTuple`` of arrays as one argument.
+    """The arrays of one robot's simulation (or of ``n`` robots, stacked on a leading axis).
+
+    As the kernels take them. numba passes a ``NamedTuple`` of arrays as one argument.
 
     Attributes:
         q: node positions, interleaved (x0, y0, x1, ...), (2N,) [m].

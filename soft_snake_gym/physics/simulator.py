@@ -159,6 +159,7 @@ class Simulator:
     """
 
     def __init__(self, config: SimConfig | None = None, *, arrays: SimArrays | None = None) -> None:
+        """Build the simulator for ``config`` (default ``SimConfig()``), in ``arrays`` if given."""
         config = SimConfig() if config is None else config
         if not isinstance(config, SimConfig):
             raise TypeError(f"config must be a SimConfig, got {type(config).__name__}")
@@ -293,8 +294,9 @@ class Simulator:
         return uk, ul
 
     def step(self, u_k=None, u_l=None) -> bool:
-        """Advance by ``h`` with curvature rates ``u_k`` (N-2,) and length rates ``u_l``
-        (N-1,) held constant (``None``: zero). Returns True if the step succeeded; on failure
+        """Advance by ``h`` with curvature and length rates held constant; True if the step succeeded.
+
+        Curvature rates ``u_k`` (N-2,) and length rates ``u_l`` (N-1,) (``None``: zero). On failure
         :attr:`failure` names the reason.
         """
         return self.advance(1, u_k, u_l)
@@ -433,9 +435,10 @@ class Simulator:
         return F.reshape(self.N, 2)
 
     def force_jacobians(self, water: bool | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Forces and their analytic Jacobians ``dF/dx`` and ``dF/dv`` as dense (2N, 2N)
-        matrices in interleaved (x0, y0, x1, ...) order: elastic, damping and (in water)
-        drag. For checking and analysis; the stepper uses the banded form.
+        """Forces and their analytic Jacobians ``dF/dx`` and ``dF/dv`` as dense (2N, 2N) matrices.
+
+        In interleaved (x0, y0, x1, ...) order: elastic, damping and (in water) drag. For checking
+        and analysis; the stepper uses the banded form.
         """
         water = self.config.medium == "water" if water is None else water
         a = self.arrays
@@ -487,15 +490,17 @@ class Simulator:
 
     @property
     def actuator_energy(self) -> float:
-        """Actuator energy since reset, the sum over steps of |work| [J] (a real actuator
-        does not get back the work the body does on it).
+        """Actuator energy since reset, the sum over steps of |work| [J].
+
+        A real actuator does not get back the work the body does on it.
         """
         return float(self.arrays.out[L.O_E_ACT])
 
     @property
     def damping_power(self) -> float:
-        """Power lost to material damping over the last step,
-        ``damping_bend sum kappa_dot^2 + damping_stretch sum ldot^2`` [W].
+        """Power lost to material damping over the last step [W].
+
+        ``damping_bend sum kappa_dot^2 + damping_stretch sum ldot^2``.
         """
         return float(self.arrays.out[L.O_P_DAMP])
 

@@ -142,12 +142,13 @@ def classify_contact(v, state, i, limit, at_limit):
 
 @njit(cache=True, error_model="numpy")
 def _be_residual(s, dt, medium, jac):
-    """Residual of backward Euler at the trial velocity ``v`` (also writes ``q = q0 + dt v``),
-    and if ``jac`` its Jacobian into J. In water with the consistent added mass (docs/model.md §4)
-    in momentum form, ``R = M (v - v0) + P_f(q, v) - P_f(q0, v0) - dt (F(q, v) + dT_f/dx(q, v))``
+    """Residual of backward Euler at the trial velocity ``v``, and if ``jac`` its Jacobian into J.
+
+    Also writes ``q = q0 + dt v``. In water with the consistent added mass (docs/model.md §4) in
+    momentum form, ``R = M (v - v0) + P_f(q, v) - P_f(q0, v0) - dt (F(q, v) + dT_f/dx(q, v))``
     (``P_f(q0, v0)`` in ``buf[B_P0]``); with ``added_mass = "kelasidi"``,
-    ``R = (M + M_A(q)) (v - v0) - dt F(q, v)``. Returns
-    (squared 2-norm, max-norm of R/m [m/s], fluid power, friction power).
+    ``R = (M + M_A(q)) (v - v0) - dt F(q, v)``. Returns (squared 2-norm, max-norm of R/m [m/s],
+    fluid power, friction power).
     """
     q, v, kbar, lbar, prm, buf, J, ibuf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.J, s.ibuf
     n = q.size
@@ -206,8 +207,9 @@ def _be_residual(s, dt, medium, jac):
 
 @njit(cache=True, error_model="numpy")
 def _update_contacts(v, buf, ibuf, prm, dt, n):
-    """Make stick-slip consistent with the end of a converged step (docs/model.md §5); True if a
-    node changed and the step must be solved again.
+    """Make stick-slip consistent with the end of a converged step (docs/model.md §5).
+
+    True if a node changed and the step must be solved again.
 
     Sliding nodes that end slower than ``V_tol`` stick. Otherwise every stuck node whose
     holding force ``f = -m v0/dt - F`` (``F``: every other force, at the end of the step)
@@ -365,9 +367,11 @@ def _symplectic_substep(s, dt, medium):
 
 @njit(cache=True, error_model="numpy")
 def ledger_energies(s):
-    """Write the body's kinetic and elastic energy and the water's ``T_f`` (0 out of water)
-    into ``out[O_E_KIN]``, ``out[O_E_ELASTIC]``, ``out[O_T_FLUID]`` [J], and the energy ledger
-    since the start recorded at ``O_L0_*`` into ``out[O_LEDGER:]`` (``LEDGER_KEYS``); ``s`` is
+    """Write the body's energies, the water's ``T_f`` and the energy ledger into ``out``.
+
+    The body's kinetic and elastic energy and the water's ``T_f`` (0 out of water) go into
+    ``out[O_E_KIN]``, ``out[O_E_ELASTIC]``, ``out[O_T_FLUID]`` [J], and the energy ledger since the
+    start recorded at ``O_L0_*`` into ``out[O_LEDGER:]`` (``LEDGER_KEYS``); ``s`` is
     :class:`~soft_snake_gym.physics.layout.SimArrays` or the plain tuple of its arrays.
     """
     s = SimArrays(*s)

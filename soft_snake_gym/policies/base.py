@@ -123,6 +123,7 @@ class BaselinePolicy:
     suggestion: ClassVar[str]
 
     def __init__(self, env: Any, **params: Any) -> None:
+        """Check that ``env`` fits the policy and read the parameters (arguments in the class docstring)."""
         self.layout = layout = env_layout(env)
         missing = [b for b in self.needs if b not in layout.blocks]
         if missing:
@@ -209,6 +210,7 @@ class BaselinePolicy:
         return (action[0] if single else action), state
 
     def __repr__(self) -> str:
+        """The class name and the parameters, as ``Name(key=value, ...)``."""
         args = ", ".join(
             f"{f.name}={getattr(self.params, f.name)!r}" for f in dataclasses.fields(self.params)
         )

@@ -36,6 +36,7 @@ class DecentralizedParams(PIDParams):
     closure: Literal["circulant", "pacemaker"] = "circulant"
 
     def __post_init__(self) -> None:
+        """Check the PID values and ``closure``."""
         super().__post_init__()
         if self.closure not in ("circulant", "pacemaker"):
             raise ValueError(f"closure = {self.closure!r} must be 'circulant' or 'pacemaker'")

@@ -72,6 +72,7 @@ class InchingParams:
     duty: float | None = None
 
     def __post_init__(self) -> None:
+        """Check ``wave``, ``duty`` and the other values."""
         if self.wave not in ("sine", "pulse"):
             raise ValueError(f"wave = {self.wave!r} is unknown; use 'sine' or 'pulse'")
         if self.duty is not None:
@@ -106,14 +107,16 @@ class InchingPIDParams(InchingParams):
     Kp: float = 10.0
 
     def __post_init__(self) -> None:
+        """Check the wave's values and ``Kp >= 0``."""
         super().__post_init__()
         if not self.Kp >= 0:
             raise ValueError(f"Kp = {self.Kp!r} 1/s must be >= 0")
 
 
 class InchingWave(BaselinePolicy):
-    """Open loop ``u_l = lbar_dot_des + rest_gain (lbar_des - lbar)`` (docs/model.md §7; the bare
-    ``u_l = lbar_dot_des`` once the rest lengths are on the wave). State per env: ``[t]``.
+    """Open loop ``u_l = lbar_dot_des + rest_gain (lbar_des - lbar)`` (docs/model.md §7).
+
+    The bare ``u_l = lbar_dot_des`` once the rest lengths are on the wave. State per env: ``[t]``.
 
     Args:
         env: SoftWorm env (or a DummyVecEnv of them).
@@ -170,8 +173,9 @@ class InchingWave(BaselinePolicy):
 
 
 class InchingPID(InchingWave):
-    """Closed loop on the measured edge length,
-    ``u_l,k = lbar_dot_des,k + Kp (lbar_des,k - |e^k|)`` (docs/model.md §7).
+    """Closed loop on the measured edge length (docs/model.md §7).
+
+    ``u_l,k = lbar_dot_des,k + Kp (lbar_des,k - |e^k|)``.
 
     Args:
         env: SoftWorm env (or a DummyVecEnv of them).

@@ -55,6 +55,7 @@ class OpenLoopParams(SerpenoidParams):
     rest_gain: float = 10.0
 
     def __post_init__(self) -> None:
+        """Check the gait's values and ``rest_gain >= 0``."""
         super().__post_init__()
         if not self.rest_gain >= 0:
             raise ValueError(f"rest_gain = {self.rest_gain!r} 1/s must be >= 0")

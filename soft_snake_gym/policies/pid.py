@@ -28,6 +28,7 @@ class PIDParams(SerpenoidParams):
     saturation: float = 1.5
 
     def __post_init__(self) -> None:
+        """Check the gait's values, the gains and the saturation."""
         super().__post_init__()
         for name in ("Kp", "Kd", "Ki"):
             if not getattr(self, name) >= 0:

@@ -1,5 +1,6 @@
-"""Several policies (trained agents and baselines) on the same seeds, with the same metrics, as
-one table and one bar chart (the library of ``soft-snake compare``).
+"""Several policies (trained agents and baselines) on the same seeds, with the same metrics.
+
+As one table and one bar chart (the library of ``soft-snake compare``).
 """
 
 from __future__ import annotations
@@ -27,8 +28,10 @@ DEFAULT_POLICIES = {
 def compare(
     env_id: str, specs: list[str], episodes: int = 10, seed: int = 0, env_kwargs: dict[str, Any] | None = None
 ) -> dict[str, dict[str, tuple[float, float]]]:
-    """Evaluate each policy spec (see :func:`soft_snake_gym.agents.make_policy`) for
-    ``episodes`` episodes on seeds ``seed, seed + 1, ...``; returns spec -> metric -> (mean, std).
+    """Evaluate each policy spec; returns spec -> metric -> (mean, std).
+
+    Specs as in :func:`soft_snake_gym.agents.make_policy`, for ``episodes`` episodes on seeds
+    ``seed, seed + 1, ...``.
     """
     env = make_eval_env(env_id, n_envs=1, seed=seed, env_kwargs=env_kwargs)
     policies = {spec: make_policy(spec, env) for spec in specs}  # all errors before any work

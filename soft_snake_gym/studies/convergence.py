@@ -104,6 +104,7 @@ class RandomActions:
     """
 
     def __init__(self, action_space: Any, seed: int = 0, scale: float = 1.0) -> None:
+        """Check ``scale`` and seed the generator (arguments in the class docstring)."""
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 < scale <= 1:
             raise ValueError(f"random policy: scale = {scale!r} must be in (0, 1]")
         self.shape = tuple(action_space.shape)
@@ -111,6 +112,7 @@ class RandomActions:
         self.rng = np.random.default_rng(self.seed)
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        """Uniform random actions (one draw per call), restarting the generator at an episode start."""
         obs = np.asarray(observation)
         if episode_start is not None and bool(np.asarray(episode_start).reshape(-1)[0]):
             self.rng = np.random.default_rng(self.seed)
@@ -120,12 +122,15 @@ class RandomActions:
         return action.astype(np.float32), state
 
     def __repr__(self) -> str:
+        """``RandomActions(seed=..., scale=...)``."""
         return f"RandomActions(seed={self.seed}, scale={self.scale})"
 
 
 def make_convergence_policy(spec: str, env: Any, seed: int) -> Any:
-    """``"random"`` or ``"random:scale=0.5"`` as :class:`RandomActions` seeded with ``seed``;
-    anything else through :func:`soft_snake_gym.agents.make_policy`.
+    """A policy for a convergence run from its spec.
+
+    ``"random"`` or ``"random:scale=0.5"`` as :class:`RandomActions` seeded with ``seed``; anything
+    else through :func:`soft_snake_gym.agents.make_policy`.
     """
     if spec.partition(":")[0].strip() != "random":
         return make_policy(spec, env)

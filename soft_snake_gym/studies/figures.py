@@ -84,8 +84,9 @@ def rollout(
 def swim_snapshots(
     out: str | Path, policy_spec: str = "pid", settle_cycles: int = 2, snapshots: int = 12
 ) -> Path:
-    """Body snapshots over one gait cycle of the thesis gait after ``settle_cycles`` cycles,
-    coloured by time, with the head, tail and centre-of-mass traces.
+    """Body snapshots over one gait cycle of the thesis gait, coloured by time.
+
+    After ``settle_cycles`` cycles, with the head, tail and centre-of-mass traces.
     """
     omega = SerpenoidParams().omega
     period = 2 * math.pi / omega

@@ -495,8 +495,9 @@ def headline_table(rows: list[dict[str, Any]]) -> str:
 
 
 def model_departures(grid: StudyGrid) -> dict[str, float]:
-    """The numbers of the report's "where the model departs" and "trajectories" sections that
-    the sweeps do not give, each from a short run.
+    """The numbers of the report's sections that the sweeps do not give, each from a short run.
+
+    The sections are "where the model departs" and "trajectories".
 
     Returns:
         ``soft_error_open_loop``, ``soft_error_pid``: mean curvature error [-] of each at the

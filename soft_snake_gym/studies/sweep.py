@@ -84,6 +84,7 @@ class StudyGrid:
     inch_transient: float = 1.0
 
     def alphas(self) -> np.ndarray:
+        """The ``n_alpha`` amplitudes [rad] of the grid."""
         hi = (
             ALPHA_MAX_FRACTION * max_serpenoid_amplitude(10, math.pi / 4)
             if self.alpha_max is None
@@ -92,9 +93,11 @@ class StudyGrid:
         return np.round(np.linspace(self.alpha_min, hi, self.n_alpha), 4)
 
     def omegas(self) -> np.ndarray:
+        """The ``n_omega`` frequencies [rad/s] of the grid."""
         return np.round(np.linspace(self.omega_min, self.omega_max, self.n_omega), 4)
 
     def mus(self) -> np.ndarray:
+        """The ``n_mu`` friction coefficients of the grid."""
         return np.round(np.linspace(self.mu_s_min, self.mu_s_max, self.n_mu), 4)
 
 
@@ -110,6 +113,7 @@ class Study:
     controllers: tuple[str, ...] = field(default=())
 
     def cells(self, grid: StudyGrid) -> list[dict[str, Any]]:
+        """The study's cells on ``grid``, one dict of parameters per run."""
         out = []
         if self.name == "swim-gait":
             for c in self.controllers:
@@ -192,9 +196,9 @@ def cell_key(cell: dict[str, Any]) -> str:
 
 
 def control_step(env_id: str, env_kwargs: dict[str, Any] | None = None) -> float:
-    """The control step ``dt`` [s] of ``env_id`` made with ``env_kwargs`` (its ``dt``, or the
-    integrator's step ``h``), read from the env itself; construction warnings are left to the
-    env that runs.
+    """The control step ``dt`` [s] of ``env_id`` made with ``env_kwargs``, read from the env itself.
+
+    Its ``dt``, or the integrator's step ``h``; construction warnings are left to the env that runs.
     """
     register_envs()
     kwargs = {k: v for k, v in (env_kwargs or {}).items() if k != "max_episode_steps"}

@@ -20,17 +20,19 @@ __all__ = ["make_callbacks"]
 
 
 def make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start: int = 0):
-    """Checkpoints and the baseline evaluation; ``wall_s`` counts from ``started``; the best
-    model is the best evaluation since ``stage_start`` (returns of a curriculum's earlier
-    stages used other rewards).
+    """Checkpoints and the baseline evaluation.
+
+    ``wall_s`` counts from ``started``; the best model is the best evaluation since ``stage_start``
+    (returns of a curriculum's earlier stages used other rewards).
     """
     # here, not above: SB3 and torch take seconds to import
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
     class Checkpoint(BaseCallback):
-        """Model and VecNormalize statistics at every multiple of ``checkpoint_freq``
-        environment steps (counted from the run's start, so a resumed run keeps the grid;
-        the first step at or past the multiple when ``n_envs`` does not divide it).
+        """Model and VecNormalize statistics at every multiple of ``checkpoint_freq`` environment steps.
+
+        Counted from the run's start, so a resumed run keeps the grid; the first step at or past the
+        multiple when ``n_envs`` does not divide it.
         """
 
         def _on_training_start(self) -> None:
@@ -44,8 +46,9 @@ def make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start:
             return True
 
     class BaselineEval(BaseCallback):
-        """Scores the agent every ``eval_freq`` steps and the baseline once, on the same
-        seeds with the same metrics; logs both and appends them to learning_curve.csv.
+        """Scores the agent every ``eval_freq`` steps and the baseline once, on the same seeds.
+
+        With the same metrics; logs both and appends them to learning_curve.csv.
         """
 
         def __init__(self):

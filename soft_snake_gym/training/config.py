@@ -85,6 +85,7 @@ class TrainConfig:
     baseline: str = "default"
 
     def __post_init__(self) -> None:
+        """Check the values, raising ``ConfigError``."""
         if self.algo not in ALGOS:
             raise ConfigError(f"algo = {self.algo!r} is not supported; use one of {', '.join(ALGOS)}")
         for name, lo in (

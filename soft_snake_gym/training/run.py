@@ -56,8 +56,9 @@ __all__ = [
 
 @contextlib.contextmanager
 def _signals_held():
-    """Ctrl-C and SIGTERM wait until the block ends (a save is never cut in half); on
-    platforms without ``pthread_sigmask`` the block runs as is.
+    """Ctrl-C and SIGTERM wait until the block ends (a save is never cut in half).
+
+    On platforms without ``pthread_sigmask`` the block runs as is.
     """
     if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
         yield
@@ -71,9 +72,10 @@ def _signals_held():
 
 
 def save_checkpoint(model, run_dir: Path, started: float | None = None) -> Path:
-    """Save the model and its VecNormalize statistics under ``checkpoints/``; with
-    ``started`` (the run's ``time.time()`` origin) also the wall time so far, so that a
-    resumed run's learning curve continues the clock (``checkpoints/wall_s.json``).
+    """Save the model and its VecNormalize statistics under ``checkpoints/``.
+
+    With ``started`` (the run's ``time.time()`` origin) also the wall time so far, so that a resumed
+    run's learning curve continues the clock (``checkpoints/wall_s.json``).
 
     Each file is written under a temporary name and renamed, with Ctrl-C and SIGTERM held
     meanwhile: an interrupt never leaves a half-written checkpoint for ``--resume`` to find.
@@ -110,8 +112,10 @@ class Terminated(KeyboardInterrupt):
 
 @contextlib.contextmanager
 def _sigterm_as_interrupt():
-    """Within the block, SIGTERM raises :class:`Terminated` (once; a repeat is ignored while
-    the checkpoint is written). Outside the main thread, signals stay as they are.
+    """Within the block, SIGTERM raises :class:`Terminated`.
+
+    Once; a repeat is ignored while the checkpoint is written. Outside the main thread, signals stay
+    as they are.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -133,9 +137,11 @@ NO_CHECKOUT = "none: the package is not a git checkout (an installed copy); see 
 
 
 def _git_commit(package_dir: Path | None = None) -> str:
-    """The commit of the git checkout the package runs from, or :data:`NO_CHECKOUT` when it
-    runs from an installed copy (``pip install .``) or git is missing. A checkout counts only
-    if it tracks the package itself, not merely encloses it (a venv inside another repo).
+    """The commit of the git checkout the package runs from, or :data:`NO_CHECKOUT`.
+
+    :data:`NO_CHECKOUT` when it runs from an installed copy (``pip install .``) or git is missing. A
+    checkout counts only if it tracks the package itself, not merely encloses it (a venv inside
+    another repo).
     """
     where = package_dir or Path(__file__).resolve().parents[1]
     try:
@@ -203,7 +209,9 @@ RUN_FILES = (
 
 
 def _check_new_run_dir(run_dir: Path) -> None:
-    """A new run may start in a missing or empty folder, or in a folder of a run that left no
+    """Check that a new run may start in ``run_dir``.
+
+    A new run may start in a missing or empty folder, or in a folder of a run that left no
     checkpoint (it failed or was stopped before its first one).
     """
     if not run_dir.exists():
@@ -257,9 +265,10 @@ def _write_run_files(cfg: TrainConfig, run_dir: Path, command: list[str] | None)
 
 
 def _make_logger(run_dir: Path):
-    """SB3's logger writing progress.csv into the run folder and TensorBoard into tb/; a
-    resumed run moves the earlier progress.csv aside (progress.1.csv, ...) instead of
-    overwriting it.
+    """SB3's logger writing progress.csv into the run folder and TensorBoard into tb/.
+
+    A resumed run moves the earlier progress.csv aside (progress.1.csv, ...) instead of overwriting
+    it.
     """
     # here, not above: SB3 and torch take seconds to import
     from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoardOutputFormat
@@ -276,8 +285,9 @@ def _make_logger(run_dir: Path):
 
 
 def plot_learning_curve(run_dir: str | Path, out: str | Path | None = None) -> Path:
-    """Plot a run's learning_curve.csv (:func:`soft_snake_gym.plots.learning_curve`), written
-    next to the CSV by default.
+    """Plot a run's learning_curve.csv (:func:`soft_snake_gym.plots.learning_curve`).
+
+    Written next to the CSV by default.
 
     Raises:
         ConfigError: the CSV has no evaluations yet.
