@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from soft_snake_gym.cli.common import env_kwargs_from_args
+from soft_snake_gym.cli.common import add_env_arguments, env_kwargs_from_args
 from soft_snake_gym.studies.convergence import DEFAULT_FACTORS, convergence, format_convergence
 
 NAME = "convergence"
@@ -47,18 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=2.0,
         help="start-up time left out of speed and error [s] (default 2)",
     )
-    p.add_argument("--max-steps", type=int, help="episode length in control steps (default: the id's)")
-    p.add_argument(
-        "--env-config",
-        metavar="YAML",
-        help="YAML file of env keywords, or a shipped one by name (softeel, softworm, eel, worm)",
-    )
-    p.add_argument(
-        "--env-kwarg",
-        action="append",
-        metavar="KEY=VALUE",
-        help="env keyword, repeatable; dotted keys reach sections (rod.damping_bend=1)",
-    )
+    add_env_arguments(p)
     p.add_argument("--json", metavar="PATH", help="also write the table as JSON")
 
 

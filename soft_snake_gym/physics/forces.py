@@ -15,7 +15,7 @@ from numba import njit
 from soft_snake_gym.physics import banded, geometry, layout
 from soft_snake_gym.physics.banded import KL, add_block, add_edge_pattern, band_lu, band_solve
 from soft_snake_gym.physics.cache import drop_stale_cache
-from soft_snake_gym.physics.geometry import edge_frame, node_tangent, turning
+from soft_snake_gym.physics.geometry import edge_frame, node_tangent, turning, turning_rate
 from soft_snake_gym.physics.layout import (
     P_A,
     P_ANISO,
@@ -116,14 +116,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
         s = kb * dk * w  # dE/dphi
         phidot = 0.0
         if db > 0.0:
-            phidot = (
-                g0x * v[2 * j - 2]
-                + g0y * v[2 * j - 1]
-                + g1x * v[2 * j]
-                + g1y * v[2 * j + 1]
-                + g2x * v[2 * j + 2]
-                + g2y * v[2 * j + 3]
-            )
+            phidot = turning_rate(g0x, g0y, g1x, g1y, g2x, g2y, v, j)
             s += db * w * w * phidot  # -d kappa_dot mapped through d kappa/d x
         F[2 * j - 2] -= s * g0x
         F[2 * j - 1] -= s * g0y
@@ -438,14 +431,7 @@ def damping_power(q, v, prm):
     if db > 0.0:
         for j in range(1, N - 1):
             k, g0x, g0y, g1x, g1y, g2x, g2y = turning(q, j)[:7]
-            kd = (1.0 + 0.25 * k * k) * (
-                g0x * v[2 * j - 2]
-                + g0y * v[2 * j - 1]
-                + g1x * v[2 * j]
-                + g1y * v[2 * j + 1]
-                + g2x * v[2 * j + 2]
-                + g2y * v[2 * j + 3]
-            )
+            kd = (1.0 + 0.25 * k * k) * turning_rate(g0x, g0y, g1x, g1y, g2x, g2y, v, j)
             p += db * kd * kd
     return p
 

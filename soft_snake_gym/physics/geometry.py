@@ -39,6 +39,22 @@ def turning(q, j):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def turning_rate(g0x, g0y, g1x, g1y, g2x, g2y, v, j):
+    """Rate of node j's turning angle, ``d phi_j/dt = (d phi_j/d x) . v`` [rad/s] (docs/model.md §2).
+
+    The gradient over nodes j-1, j, j+1 is :func:`turning`'s ``g0``, ``g1``, ``g2``.
+    """
+    return (
+        g0x * v[2 * j - 2]
+        + g0y * v[2 * j - 1]
+        + g1x * v[2 * j]
+        + g1y * v[2 * j + 1]
+        + g2x * v[2 * j + 2]
+        + g2y * v[2 * j + 3]
+    )
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def edge_frame(q, v, i):
     """Edge i's length, unit tangent, normal and mean velocity, as (l, tx, ty, nx, ny, vx, vy, vt, vn).
 
@@ -68,14 +84,7 @@ def curvature_rates(q, v, kdot):
     """Exact curvature rate ``(1 + kappa^2/4)(theta_dot^j - theta_dot^(j-1))``, (N-2,) [1/s]."""
     for j in range(1, q.size // 2 - 1):
         k, g0x, g0y, g1x, g1y, g2x, g2y = turning(q, j)[:7]
-        phidot = (
-            g0x * v[2 * j - 2]
-            + g0y * v[2 * j - 1]
-            + g1x * v[2 * j]
-            + g1y * v[2 * j + 1]
-            + g2x * v[2 * j + 2]
-            + g2y * v[2 * j + 3]
-        )
+        phidot = turning_rate(g0x, g0y, g1x, g1y, g2x, g2y, v, j)
         kdot[j - 1] = (1.0 + 0.25 * k * k) * phidot
 
 
