@@ -9,9 +9,10 @@ as :class:`~soft_snake_gym.policies.pid.CurvaturePID` then acts on that phase.
 
 Default gains are (Kp, Kd, Ki) = (10, 2, 1), the sources' second set, not (10, 1, 5): with
 (10, 1, 5) the chain of neighbour-to-neighbour phase references is string-unstable in this
-model (measured from rest at the thesis gait, mean error over 2-6 s: centralized 0.0040,
-pacemaker 0.050, circulant 0.107); with (10, 2, 1) it settles in about a second (centralized
-0.0033, pacemaker 0.0035, circulant 0.0044).
+model. Measured from rest at the thesis gait, mean curvature error over 2-6 s with the
+integration step divided by 16 (converged): centralized 0.0063, pacemaker 0.037, circulant
+0.056 with (10, 1, 5); 0.0054, 0.0061, 0.0075 with (10, 2, 1). At the default step backward
+Euler's numerical damping hides the instability (0.0055, 0.0054, 0.0145 with (10, 1, 5)).
 """
 
 from __future__ import annotations
