@@ -38,6 +38,7 @@ import numpy as np
 
 import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.config import load_yaml, shipped_configs
+from soft_snake_gym.envs.registration import importable_id
 from soft_snake_gym.envs.vector import ROBOTS_PER_THREAD
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
 
@@ -176,7 +177,9 @@ def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict
     if kind == "batched":
         venv = SoftVecEnv(env_id, n_envs=n_envs, seed=0, **env_kwargs)
     else:
-        venv = make_vec_env(env_id, n_envs=n_envs, seed=0, env_kwargs=env_kwargs, vec_env_cls=SubprocVecEnv)
+        venv = make_vec_env(
+            importable_id(env_id), n_envs=n_envs, seed=0, env_kwargs=env_kwargs, vec_env_cls=SubprocVecEnv
+        )
     env = VecNormalize(venv)
     try:
         model = PPO("MlpPolicy", env, seed=0, device="cpu", verbose=0, **ppo_kwargs)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 from soft_snake_gym.cli import main
 from soft_snake_gym.physics.cache import drop_stale_cache
@@ -68,3 +70,20 @@ def test_stale_numba_cache_is_dropped_when_a_dependency_changes(tmp_path):
     dep.write_text("x = 2")
     assert drop_stale_cache(str(module), [str(dep)])  # changed: the caller's cache goes
     assert not any(f.exists() for f in cached) and other.exists()
+
+
+def test_ppo_timing_runs_from_the_command_line_with_subprocess_workers(tmp_path):
+    # `python -m soft_snake_gym.cli` runs a package __main__, which multiprocessing does not
+    # re-import in SubprocVecEnv's workers: they must make the ids all the same
+    out = tmp_path / "bench.json"
+    args = ["--seconds", "0.05", "--repeats", "1", "--robots", "2", "--nodes", "--ppo-timesteps", "512"]
+    proc = subprocess.run(
+        [sys.executable, "-m", "soft_snake_gym.cli", "benchmark", *args, "--json", str(out), "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr
+    ppo = {r["kind"]: r for r in json.loads(out.read_text())["ppo"]}
+    assert set(ppo) == {"batched", "subproc"}
+    assert all(r["steps_per_s"] > 0 for r in ppo.values())

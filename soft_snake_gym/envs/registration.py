@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-__all__ = ["ENV_IDS", "VECTOR_ENTRY_POINTS", "MAX_EPISODE_STEPS", "register_envs"]
+__all__ = ["ENV_IDS", "VECTOR_ENTRY_POINTS", "MAX_EPISODE_STEPS", "importable_id", "register_envs"]
 
 MAX_EPISODE_STEPS = 1000
 ENV_IDS = {
@@ -38,3 +38,13 @@ def register_envs() -> None:
                 max_episode_steps=MAX_EPISODE_STEPS,
                 vector_entry_point=VECTOR_ENTRY_POINTS[env_id],
             )
+
+
+def importable_id(env_id: str) -> str:
+    """``env_id`` as a fresh process can make it: ``"soft_snake_gym:SoftEel-v0"``.
+
+    ``gym.make`` imports the module before the ``:``, which registers the ids. Worker processes
+    (SB3's ``SubprocVecEnv``) need it: started by ``python -m soft_snake_gym.cli``, they do not
+    import the package, since multiprocessing does not re-run a main module named ``__main__``.
+    """
+    return env_id if ":" in env_id else f"soft_snake_gym:{env_id}"

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from soft_snake_gym.config import ConfigError
+from soft_snake_gym.envs.registration import importable_id
 from soft_snake_gym.training.callbacks import make_callbacks
 from soft_snake_gym.training.config import TrainConfig, _algo_class, check_env_id, planned_steps
 from soft_snake_gym.training.run import (
@@ -37,7 +38,11 @@ def make_train_env(cfg: TrainConfig, seed: int):
         return SoftVecEnv(cfg.env_id, n_envs=cfg.n_envs, seed=seed, **dict(cfg.env_kwargs))
     cls = SubprocVecEnv if cfg.vec_env == "subproc" else DummyVecEnv
     return make_vec_env(
-        cfg.env_id, n_envs=cfg.n_envs, seed=seed, env_kwargs=dict(cfg.env_kwargs), vec_env_cls=cls
+        importable_id(cfg.env_id),
+        n_envs=cfg.n_envs,
+        seed=seed,
+        env_kwargs=dict(cfg.env_kwargs),
+        vec_env_cls=cls,
     )
 
 
