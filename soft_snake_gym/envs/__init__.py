@@ -5,9 +5,10 @@ Importing ``soft_snake_gym`` registers both ids, so ``gym.make("SoftEel-v0")`` w
 ``import soft_snake_gym`` and ``gym.make("soft_snake_gym:SoftEel-v0")`` works without it.
 """
 
-from soft_snake_gym.envs.base import Randomization, SoftRobotEnv
+from soft_snake_gym.envs.base import SoftRobotEnv
 from soft_snake_gym.envs.inch import InchEnv, InchSettings
 from soft_snake_gym.envs.registration import ENV_IDS, register_envs
+from soft_snake_gym.envs.settings import Randomization
 from soft_snake_gym.envs.swim import SwimEnv, SwimSettings
 from soft_snake_gym.envs.task import TaskArrays
 from soft_snake_gym.envs.vector import InchVectorEnv, RobotBatch, SoftVectorEnv, SwimVectorEnv

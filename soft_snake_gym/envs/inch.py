@@ -9,7 +9,8 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from soft_snake_gym.envs import task as T
-from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv
+from soft_snake_gym.envs.base import SoftRobotEnv
+from soft_snake_gym.envs.settings import BaseSettings
 from soft_snake_gym.params import check_number
 
 __all__ = ["InchEnv", "InchSettings"]

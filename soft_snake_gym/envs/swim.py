@@ -10,7 +10,8 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from soft_snake_gym.envs import task as T
-from soft_snake_gym.envs.base import BaseSettings, SoftRobotEnv
+from soft_snake_gym.envs.base import SoftRobotEnv
+from soft_snake_gym.envs.settings import BaseSettings
 from soft_snake_gym.gaits import (
     SerpenoidParams,
     max_serpenoid_amplitude,

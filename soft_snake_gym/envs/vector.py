@@ -28,9 +28,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from soft_snake_gym.envs import task as T
-from soft_snake_gym.envs.base import SoftRobotEnv, resolve_settings
+from soft_snake_gym.envs.base import SoftRobotEnv
 from soft_snake_gym.envs.inch import InchEnv
 from soft_snake_gym.envs.registration import MAX_EPISODE_STEPS
+from soft_snake_gym.envs.settings import resolve_settings
 from soft_snake_gym.envs.swim import SwimEnv
 from soft_snake_gym.envs.task import TaskArrays
 from soft_snake_gym.params import SimConfig, check_int
