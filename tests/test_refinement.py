@@ -87,6 +87,8 @@ def test_gait_mapping_is_the_identity_on_the_design_robot_and_scales_with_the_ed
     assert 2 * math.pi * l / delta == pytest.approx(8 * l_d)
 
 
+# the pulse's peak rate exceeds max_length_rate here: its clipping warning is expected
+@pytest.mark.filterwarnings("ignore:inching. the pulse wave's peak rate")
 def test_controllers_command_the_same_wave_on_arc_length():
     """At equal arc length and time, the refined robot's controllers ask for the design's targets.
 
