@@ -37,10 +37,10 @@ import numba
 import numpy as np
 
 import soft_snake_gym  # noqa: F401 - registers the ids
-from soft_snake_gym.config import load_yaml, shipped_configs
 from soft_snake_gym.envs.registration import importable_id
 from soft_snake_gym.envs.vector import ROBOTS_PER_THREAD
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
+from soft_snake_gym.training import load_train_config, policy_kwargs
 
 __all__ = ["run_benchmark", "format_report", "DEFAULT_ROBOTS", "DEFAULT_NODES"]
 
@@ -137,24 +137,8 @@ def _have_mujoco() -> str | None:
 # --- PPO --------------------------------------------------------------------------------------
 def _ppo_settings(env_id: str) -> tuple[int, dict[str, Any], dict[str, Any]]:
     """n_envs, PPO keywords and env keywords of the package's PPO config for ``env_id``."""
-    cfg = dict(load_yaml(shipped_configs("algorithm")["ppo"])[env_id])
-    n_envs = int(cfg.pop("n_envs", 8))
-    env_kwargs = dict(cfg.pop("env_kwargs", {}) or {})
-    run_keys = (
-        "n_timesteps",
-        "normalize",
-        "policy",
-        "vec_env",
-        "eval_freq",
-        "eval_episodes",
-        "eval_seed",
-        "checkpoint_freq",
-        "baseline",
-        "seed",
-    )
-    for key in run_keys:
-        cfg.pop(key, None)
-    return n_envs, cfg, env_kwargs
+    cfg = load_train_config(env_id)
+    return cfg.n_envs, {**cfg.hyperparams, "policy_kwargs": policy_kwargs(cfg)}, dict(cfg.env_kwargs)
 
 
 def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict[str, Any]:

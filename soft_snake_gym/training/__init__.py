@@ -24,7 +24,7 @@ from soft_snake_gym.training.run import (
     plot_learning_curve,
     save_checkpoint,
 )
-from soft_snake_gym.training.train import make_train_env, train
+from soft_snake_gym.training.train import make_train_env, policy_kwargs, train
 
 __all__ = [
     "ACTIVATIONS",
@@ -41,6 +41,7 @@ __all__ = [
     "make_train_env",
     "planned_steps",
     "plot_learning_curve",
+    "policy_kwargs",
     "save_checkpoint",
     "steps_per_iteration",
     "train",

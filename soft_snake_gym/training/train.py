@@ -23,7 +23,7 @@ from soft_snake_gym.training.run import (
     save_checkpoint,
 )
 
-__all__ = ["make_train_env", "train"]
+__all__ = ["make_train_env", "policy_kwargs", "train"]
 
 
 def make_train_env(cfg: TrainConfig, seed: int):
@@ -46,7 +46,8 @@ def make_train_env(cfg: TrainConfig, seed: int):
     )
 
 
-def _policy_kwargs(cfg: TrainConfig) -> dict[str, Any]:
+def policy_kwargs(cfg: TrainConfig) -> dict[str, Any]:
+    """The run's ``policy_kwargs`` as SB3 takes them (activation names become torch classes)."""
     import torch.nn as nn  # here, not above: torch takes seconds to import
 
     kwargs = dict(cfg.policy_kwargs)
@@ -116,7 +117,7 @@ def train(
             model = algo(
                 cfg.policy,
                 env,
-                policy_kwargs=_policy_kwargs(cfg),
+                policy_kwargs=policy_kwargs(cfg),
                 seed=cfg.seed,
                 device="cpu",
                 verbose=0,
