@@ -137,13 +137,14 @@ TABLE = (
     "cost_of_transport",
 )
 
-#: (key, label, unit) of the summary table, in order (from :data:`METRICS`).
-COLUMNS = [(METRICS[n].key, METRICS[n].label, METRICS[n].unit) for n in TABLE]
-
 
 def metric_columns(names: tuple[str, ...] | list[str]) -> list[tuple[str, str, str]]:
     """(key, label, unit) of the metrics ``names`` of :data:`METRICS`, in that order."""
     return [(METRICS[n].key, METRICS[n].label, METRICS[n].unit) for n in names]
+
+
+#: (key, label, unit) of the summary table, in order (from :data:`METRICS`).
+COLUMNS = metric_columns(TABLE)
 
 
 def make_eval_env(
