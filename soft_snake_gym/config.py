@@ -324,9 +324,10 @@ def parse_assignments(
 CONFIG_DIR = Path(__file__).parent / "configs"
 
 #: The kinds of config shipped in ``soft_snake_gym/configs/<kind>/``: env keywords
-#: (``gym.make(id, config=...)``), a baseline's parameters (``--policy-config``), and
-#: hyperparameters keyed by env id (``soft-snake train --config``).
-CONFIG_KINDS = ("env", "policy", "algorithm")
+#: (``gym.make(id, config=...)``), a baseline's parameters (``--policy-config``),
+#: hyperparameters keyed by env id (``soft-snake train --config``) and physics presets
+#: (``preset=``, :func:`load_preset`).
+CONFIG_KINDS = ("env", "policy", "algorithm", "presets")
 
 
 def shipped_configs(kind: str) -> dict[str, Path]:
@@ -368,15 +369,13 @@ def config_path(config: str | Path, kind: str) -> Path:
 
 
 # --- presets ------------------------------------------------------------------------------------
-_PRESET_DIR = Path(__file__).parent / "configs" / "presets"
-
 #: The sections a preset may set: those of :class:`SimConfig` that describe the physics.
 PRESET_SECTIONS = ("rod", "fluid", "ground", "integrator")
 
 
 def presets() -> list[str]:
     """Names of the presets shipped with the package (``thesis``: the sources' setting)."""
-    return sorted(p.stem for p in _PRESET_DIR.glob("*.yaml"))
+    return list(shipped_configs("presets"))
 
 
 def load_preset(name: str) -> dict[str, dict[str, Any]]:
@@ -391,7 +390,7 @@ def load_preset(name: str) -> dict[str, dict[str, Any]]:
         close = difflib.get_close_matches(str(name), available, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise ConfigError(f"preset = {name!r} is unknown{hint}; available presets: {', '.join(available)}")
-    data = load_yaml(_PRESET_DIR / f"{name}.yaml")
+    data = load_yaml(shipped_configs("presets")[name])
     for key, value in data.items():
         if key not in PRESET_SECTIONS or not isinstance(value, dict):
             raise ConfigError(
