@@ -14,6 +14,7 @@ import glob
 import math
 import warnings
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -21,7 +22,7 @@ import numpy as np
 from soft_snake_gym import plots
 from soft_snake_gym.agents import make_policy
 from soft_snake_gym.config import ConfigError
-from soft_snake_gym.distributed import RAY_INSTALL
+from soft_snake_gym.distributed import RAY_INSTALL, RayNotInstalled
 from soft_snake_gym.evaluation import evaluate, make_eval_env, metric_columns, summarize
 
 __all__ = [
@@ -84,6 +85,18 @@ def _natural(path: Path) -> tuple:
     return (path.name.rstrip("0123456789"), int(digits) if digits else -1, path.name)
 
 
+def _rliable() -> tuple[ModuleType, ModuleType]:
+    """``rliable.library`` and ``rliable.metrics``, or :class:`RayNotInstalled` naming the install line."""
+    try:  # here, not above: optional, and rliable imports pandas, arch and seaborn (seconds)
+        from rliable import library, metrics
+    except ImportError:
+        raise RayNotInstalled(
+            f"the interquartile mean over seeds needs rliable, which is not installed; install it with: "
+            f"{RAY_INSTALL}"
+        ) from None
+    return library, metrics
+
+
 def iqm_intervals(
     scores: dict[str, np.ndarray], reps: int = BOOTSTRAP_REPS, seed: int = BOOTSTRAP_SEED
 ) -> dict[str, tuple[float, float, float]]:
@@ -103,28 +116,22 @@ def iqm_intervals(
     Raises:
         RayNotInstalled: rliable (part of the ``ray`` extra) is missing.
     """
-    from soft_snake_gym.distributed import RayNotInstalled
-
-    try:  # here, not above: optional, and rliable imports pandas, arch and seaborn (seconds)
-        from rliable import library, metrics
-    except ImportError:
-        raise RayNotInstalled(
-            f"the interquartile mean over seeds needs rliable, which is not installed; install it with: "
-            f"{RAY_INSTALL}"
-        ) from None
-    finite = {k: np.asarray(v, float).reshape(-1, 1) for k, v in scores.items() if np.isfinite(v).all()}
-    out = {k: (math.nan, math.nan, math.nan) for k in scores}
-    if finite:
+    library, metrics = _rliable()
+    out = {}
+    for key, values in scores.items():
+        runs = np.asarray(values, float).reshape(-1, 1)  # (n_runs, 1 task)
+        if not np.isfinite(runs).all():
+            out[key] = (math.nan, math.nan, math.nan)
+            continue
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FutureWarning)  # arch: random_state is being renamed
             point, interval = library.get_interval_estimates(
-                finite,
+                {key: runs},
                 lambda x: np.array([metrics.aggregate_iqm(x)]),
                 reps=reps,
-                random_state=np.random.RandomState(seed),
+                random_state=np.random.RandomState(seed),  # each metric's own draws
             )
-        for k in finite:
-            out[k] = (float(point[k][0]), float(interval[k][0, 0]), float(interval[k][1, 0]))
+        out[key] = (float(point[key][0]), float(interval[key][0, 0]), float(interval[key][1, 0]))
     return out
 
 
@@ -155,6 +162,8 @@ def compare(
     for spec in specs:  # all errors before any work
         runs = seed_runs(spec)
         policies[spec] = {str(r): make_policy(str(r), env) for r in runs} if runs else make_policy(spec, env)
+    if any(isinstance(p, dict) for p in policies.values()):
+        _rliable()  # missing: say so before any episode runs
     results: dict[str, dict[str, tuple[float, ...]]] = {}
     for spec, policy in policies.items():
         if not isinstance(policy, dict):
