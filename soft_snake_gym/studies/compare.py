@@ -94,6 +94,11 @@ def _rliable() -> tuple[ModuleType, ModuleType]:
             f"the interquartile mean over seeds needs rliable, which is not installed; install it with: "
             f"{RAY_INSTALL}"
         ) from None
+    except Exception as err:  # noqa: BLE001 - rliable 1.2 breaks at import with arch 7 on pandas 3
+        raise RayNotInstalled(
+            f"rliable fails to import ({type(err).__name__}: {err}); it needs arch < 8 and pandas < 3, "
+            f"which {RAY_INSTALL} installs"
+        ) from None
     return library, metrics
 
 
