@@ -24,6 +24,8 @@ ROOT = Path(__file__).resolve().parents[1]
 ZOO = ROOT / "soft_snake_gym" / "zoo"
 DOCS = ROOT / "docs" / "img"
 
+#: training steps of the navigation agents (as far as the shared machine allowed: docs/navigation.md)
+NAV_STEPS = {"SoftEelGoal-v0": "2000000", "SoftEelPath-v0": "2000000"}
 #: env id -> list of soft-snake train argument lists (later ones resume the run)
 STAGES = {
     "SoftEel-v0": [
@@ -38,7 +40,12 @@ STAGES = {
         ["--n-timesteps", "1900000", "--hyperparams", "env_kwargs.integrator.substeps=4"],
         ["--n-timesteps", "2150000", "--hyperparams", "env_kwargs.integrator.substeps=16"],
     ],
+    # the navigation tasks start from the shipped eel (init_from in ppo.yml) and learn to steer
+    "SoftEelGoal-v0": [["--n-timesteps", NAV_STEPS["SoftEelGoal-v0"]]],
+    "SoftEelPath-v0": [["--n-timesteps", NAV_STEPS["SoftEelPath-v0"]]],
 }
+#: held-out seeds of the navigation comparison (training uses 0..7 and evaluates on 1000..)
+NAV_SEED, NAV_EPISODES = "100", "20"
 
 
 def soft_snake(*args: str) -> None:
@@ -89,6 +96,19 @@ def main() -> None:
         "--json",
         str(DOCS / "compare_SoftWorm-v0.json"),
     )
+    for env_id in ("SoftEelGoal-v0", "SoftEelPath-v0"):  # docs/navigation.md
+        soft_snake(
+            "compare",
+            env_id,
+            "--episodes",
+            NAV_EPISODES,
+            "--seed",
+            NAV_SEED,
+            "--out",
+            str(DOCS / f"compare_{env_id}.png"),
+            "--json",
+            str(DOCS / f"compare_{env_id}.json"),
+        )
 
 
 if __name__ == "__main__":

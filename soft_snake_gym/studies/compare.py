@@ -11,7 +11,7 @@ from typing import Any
 
 from soft_snake_gym import plots
 from soft_snake_gym.agents import make_policy
-from soft_snake_gym.evaluation import evaluate, make_eval_env, metric_columns, summarize
+from soft_snake_gym.evaluation import NAV_METRICS, evaluate, make_eval_env, metric_columns, summarize
 
 __all__ = ["DEFAULT_POLICIES", "check_figure_path", "compare", "format_comparison", "plot_comparison"]
 
@@ -22,7 +22,15 @@ CHART = ("average_speed", "cost_of_transport", "return")
 DEFAULT_POLICIES = {
     "SoftEel-v0": ["zoo:ppo", "pid", "open-loop"],
     "SoftWorm-v0": ["zoo:ppo", "inching-pid", "inching"],
+    "SoftEelGoal-v0": ["zoo:ppo", "los"],
+    "SoftEelPath-v0": ["zoo:ppo", "los"],
 }
+
+
+def _columns(results: dict[str, dict[str, tuple[float, float]]]) -> list[tuple[str, str, str]]:
+    """:data:`METRICS`, then the navigation metrics that some policy's results have."""
+    nav = [n for n in NAV_METRICS if any(n in summary for summary in results.values())]
+    return METRICS + metric_columns(nav)
 
 
 def compare(
@@ -46,11 +54,12 @@ def compare(
 def format_comparison(results: dict[str, dict[str, tuple[float, float]]], title: str = "") -> str:
     """A plain-text table, one row per policy, mean ± std per metric."""
     width = max(12, *(len(s) for s in results))
-    head = f"{'policy':<{width}}" + "".join(f"  {f'{label} [{unit}]':>24}" for _, label, unit in METRICS)
+    columns = _columns(results)
+    head = f"{'policy':<{width}}" + "".join(f"  {f'{label} [{unit}]':>24}" for _, label, unit in columns)
     lines = ([title] if title else []) + [head, "-" * len(head)]
     for spec, summary in results.items():
         cells = []
-        for key, _, _ in METRICS:
+        for key, _, _ in columns:
             mean, std = summary.get(key, (math.nan, math.nan))
             cells.append(
                 f"  {'n/a':>24}" if not math.isfinite(mean) else f"  {f'{mean:.4g} ± {std:.2g}':>24}"
@@ -62,9 +71,13 @@ def format_comparison(results: dict[str, dict[str, tuple[float, float]]], title:
 def plot_comparison(
     results: dict[str, dict[str, tuple[float, float]]], path: str | Path, title: str = ""
 ) -> Path:
-    """Bar chart (mean with std error bars) of speed, cost of transport and return."""
-    labels = {k: (label, unit) for k, label, unit in METRICS}
-    return plots.comparison_chart(results, [(k, *labels[k]) for k in CHART], path, title)
+    """Bar chart (mean with std error bars) of speed, cost of transport and return.
+
+    And of the success rate or the cross-track error in a navigation task.
+    """
+    labels = {k: (label, unit) for k, label, unit in _columns(results)}
+    chart = list(CHART) + [k for k in ("success", "cross_track_error") if k in labels]
+    return plots.comparison_chart(results, [(k, *labels[k]) for k in chart], path, title)
 
 
 def check_figure_path(path: str | Path) -> None:
