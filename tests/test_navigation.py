@@ -6,6 +6,7 @@ tests/test_envs.py, their batched env in tests/test_vec_env.py.
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 
@@ -335,3 +336,47 @@ def test_evaluate_and_compare_run_the_navigation_tasks(tmp_path, capsys):
     assert main([*args, "--env-kwarg", "path_offset=[0.3,0.3]", "path_angle=[0,0]"]) == 0
     table = capsys.readouterr().out
     assert "cross-track error [m]" in table and chart.is_file()
+
+
+def test_init_from_starts_a_navigation_agent_as_the_shipped_eel():
+    """The appended observation entry starts at zero weight: the new agent acts as the source does."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from soft_snake_gym.agents import load_trained, zoo_path
+    from soft_snake_gym.training.train import init_from
+
+    env = VecNormalize(make_vec_env("SoftEelGoal-v0", n_envs=1, seed=0))
+    model = PPO("MlpPolicy", env, policy_kwargs={"net_arch": [64, 64]}, seed=0, device="cpu")
+    init_from(model, "zoo:SoftEel-v0")
+    source = load_trained(zoo_path("SoftEel-v0", "ppo"), gym.make("SoftEel-v0"))
+    np.testing.assert_array_equal(env.obs_rms.mean[:28], source.obs_rms.mean)
+    goal = gym.make("SoftEelGoal-v0")
+    obs, _ = goal.reset(seed=3)
+    for _ in range(40):
+        obs, *_ = goal.step(goal.action_space.sample())
+    for last in (obs[-1], 7.0):  # whatever the new entry says
+        new = np.append(obs[:-1], last).astype(np.float32)
+        mine = model.predict(env.normalize_obs(new[None]), deterministic=True)[0]
+        np.testing.assert_allclose(mine, source.predict(obs[None, :-1], deterministic=True)[0], atol=1e-6)
+    small = PPO("MlpPolicy", env, policy_kwargs={"net_arch": [32]}, device="cpu")
+    with pytest.raises(ConfigError, match="shape .* the networks must match"):
+        init_from(small, "zoo:SoftEel-v0")
+    with pytest.raises(ConfigError, match="no shipped ppo agent for SoftEelX-v0"):
+        init_from(model, "zoo:SoftEelX-v0")
+
+
+@pytest.mark.slow
+def test_train_runs_a_navigation_task_on_the_batched_env(tmp_path):
+    from soft_snake_gym.cli import main
+
+    run = tmp_path / "goal"
+    tiny = ["n_envs=2", "n_steps=64", "batch_size=64", "n_epochs=1", "eval_freq=128", "eval_episodes=1"]
+    args = ["train", "SoftEelGoal-v0", "--n-timesteps", "128", "--run-dir", str(run), "--no-progress"]
+    assert main([*args, "--hyperparams", *tiny, "env_kwargs.max_episode_steps=100"]) == 0
+    config = (run / "config.yaml").read_text()
+    assert "init_from: zoo:SoftEel-v0" in config and "vec_env: batched" in config
+    with open(run / "learning_curve.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert rows and float(rows[-1]["baseline_return"]) > 0  # the ILOS baseline, scored once
