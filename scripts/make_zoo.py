@@ -24,8 +24,6 @@ ROOT = Path(__file__).resolve().parents[1]
 ZOO = ROOT / "soft_snake_gym" / "zoo"
 DOCS = ROOT / "docs" / "img"
 
-#: training steps of the navigation agents (as far as the shared machine allowed: docs/navigation.md)
-NAV_STEPS = {"SoftEelGoal-v0": "2000000", "SoftEelPath-v0": "2000000"}
 #: env id -> list of soft-snake train argument lists (later ones resume the run)
 STAGES = {
     "SoftEel-v0": [
@@ -40,9 +38,10 @@ STAGES = {
         ["--n-timesteps", "1900000", "--hyperparams", "env_kwargs.integrator.substeps=4"],
         ["--n-timesteps", "2150000", "--hyperparams", "env_kwargs.integrator.substeps=16"],
     ],
-    # the navigation tasks start from the shipped eel (init_from in ppo.yml) and learn to steer
-    "SoftEelGoal-v0": [["--n-timesteps", NAV_STEPS["SoftEelGoal-v0"]]],
-    "SoftEelPath-v0": [["--n-timesteps", NAV_STEPS["SoftEelPath-v0"]]],
+    # the goal task starts from the shipped eel (init_from in ppo.yml) and learns to steer; the
+    # shipped agent is the evaluation at 100k steps (docs/navigation.md: the shared machine allowed
+    # no more). No path-following agent is shipped yet.
+    "SoftEelGoal-v0": [["--n-timesteps", "100000"]],
 }
 #: held-out seeds of the navigation comparison (training uses 0..7 and evaluates on 1000..)
 NAV_SEED, NAV_EPISODES = "100", "20"

@@ -396,7 +396,7 @@ class SoftRobotEnv(gym.Env):
             np.asarray(self._trail_com),
             np.asarray(self._trail_head),
             self.sim.time,
-            self._goal,
+            self.task.tp[T.T_GCOS : T.T_GSIN + 1].copy(),  # the target's bearing, the path's direction
             self.env_id,
             self._failure,
             self.sim.stuck if self._failure is None and self.medium == "ground" else None,

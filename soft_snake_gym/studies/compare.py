@@ -23,7 +23,7 @@ DEFAULT_POLICIES = {
     "SoftEel-v0": ["zoo:ppo", "pid", "open-loop"],
     "SoftWorm-v0": ["zoo:ppo", "inching-pid", "inching"],
     "SoftEelGoal-v0": ["zoo:ppo", "los"],
-    "SoftEelPath-v0": ["zoo:ppo", "los"],
+    "SoftEelPath-v0": ["los", "pid"],  # no path-following agent is shipped yet (docs/navigation.md)
 }
 
 
