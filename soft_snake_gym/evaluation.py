@@ -22,6 +22,11 @@ Per episode:
   on land;
 - ``energy_actuator`` [J] and ``cost_of_transport`` [-] (the env's, docs/model.md §8);
 - ``failure``: the env's failure reason, or "";
+- in ``SoftEelGoal-v0``: ``success`` (1 if the target was reached, else 0; its mean is the
+  success rate), ``time_to_goal`` [s] (inf if not reached: means are over the reached ones), ``target_distance`` [m] (left at
+  the end); in ``SoftEelPath-v0``: ``cross_track_error`` [m] (mean |error| over the episode),
+  ``final_cross_track_error`` [m] (|error| at the end); in both ``distance`` and
+  ``average_speed`` are progress toward the target or along the path;
 - ``window_start`` [s]: where the speed and error window began: ``transient``, or 0 for an
   episode shorter than twice that (a failure), whose whole length is used.
 """
@@ -47,6 +52,7 @@ __all__ = [
     "format_table",
     "COLUMNS",
     "METRICS",
+    "NAV_METRICS",
     "Metric",
     "TABLE",
     "metric_columns",
@@ -112,6 +118,11 @@ METRICS: dict[str, Metric] = {
         Metric("energy_actuator", "actuator energy", "J", "episode"),
         Metric("cost_of_transport", "cost of transport", "-", "episode"),
         Metric("duration", "duration", "s", "episode"),
+        Metric("success", "success rate", "-", "episode"),
+        Metric("time_to_goal", "time to goal", "s", "episode"),
+        Metric("target_distance", "distance to target", "m", "episode"),
+        Metric("cross_track_error", "cross-track error", "m", "episode"),
+        Metric("final_cross_track_error", "final cross-track error", "m", "episode"),
         Metric(
             "episode_speed",
             "average speed over the episode",
@@ -135,7 +146,15 @@ TABLE = (
     "energy_friction",
     "energy_actuator",
     "cost_of_transport",
+    "success",
+    "time_to_goal",
+    "target_distance",
+    "cross_track_error",
+    "final_cross_track_error",
 )
+
+#: The navigation tasks' metrics (written only by ``SoftEelGoal-v0`` and ``SoftEelPath-v0``).
+NAV_METRICS = ("success", "time_to_goal", "target_distance", "cross_track_error", "final_cross_track_error")
 
 
 def metric_columns(names: tuple[str, ...] | list[str]) -> list[tuple[str, str, str]]:
@@ -282,6 +301,9 @@ class EpisodeRecorder:
             out["window_fluid_power"] = power
         if "energy_friction" in m:
             out["energy_friction"] = float(m["energy_friction"])
+        for key in NAV_METRICS:
+            if key in m:
+                out[key] = float(m[key])
         return out
 
 

@@ -31,7 +31,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
-from soft_snake_gym.envs.registration import MAX_EPISODE_STEPS
+from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.vector import SoftVectorEnv
 
 __all__ = ["SoftVecEnv"]
@@ -41,11 +41,13 @@ class SoftVecEnv(VecEnv):
     """``n_envs`` robots of ``env_id`` as an SB3 ``VecEnv`` over one batched simulator.
 
     Args:
-        env_id: ``"SoftEel-v0"`` or ``"SoftWorm-v0"``.
+        env_id: an id of the batched env (``"SoftEel-v0"``, ``"SoftWorm-v0"``, ``"SoftEelGoal-v0"``,
+            ``"SoftEelPath-v0"``).
         n_envs: number of robots.
         seed: robot ``i`` is seeded ``seed + i`` at the first reset (as ``make_vec_env``);
             ``None``: unseeded. ``VecEnv.seed(s)`` reseeds the next reset the same way.
-        max_episode_steps: time limit per episode (default 1000, as ``gym.make``); ``None``: none.
+        max_episode_steps: time limit per episode (default: the id's registered one, as
+            ``gym.make``); ``None``: none.
         num_threads: numba threads for the batched step (default: one per 64 robots).
         step_info: also put the single env's per-step info into every robot's info dict.
         **env_kwargs: the env's keywords (``rod``, ``energy_cost_weight``, ``config``...).
@@ -57,7 +59,7 @@ class SoftVecEnv(VecEnv):
         n_envs: int = 8,
         *,
         seed: int | None = None,
-        max_episode_steps: int | None = MAX_EPISODE_STEPS,
+        max_episode_steps: int | str | None = "registered",
         num_threads: int | None = None,
         step_info: bool = False,
         **env_kwargs: Any,
@@ -118,6 +120,8 @@ class SoftVecEnv(VecEnv):
                 }
                 info["metrics"] = venv.episode_metrics(i)
                 info["failure"] = venv.envs[i].failure
+                if venv.envs[i].task_kind != T.TASK_DIRECTION:  # SB3 counts it at the episode's end
+                    info["is_success"] = bool(venv.batch.task.rs[i, T.R_SUCCESS] > 0.0)
                 venv.reset_robot(i)
         return venv.obs.copy(), rewards, dones, infos
 

@@ -126,7 +126,14 @@ def test_assignments_nest_dotted_keys_and_name_a_bad_item():
 
 def test_shipped_configs_are_found_by_name_and_paths_pass_through(tmp_path):
     assert set(shipped_configs("env")) == {"softeel", "softworm", "eel", "worm"}
-    assert set(shipped_configs("policy")) == {"pid", "pid_soft", "open_loop", "decentralized", "inching"}
+    assert set(shipped_configs("policy")) == {
+        "pid",
+        "pid_soft",
+        "open_loop",
+        "decentralized",
+        "inching",
+        "los",
+    }
     assert set(shipped_configs("algorithm")) == {"ppo", "sac"}
     assert config_path("softeel", "env") == CONFIG_DIR / "env" / "softeel.yaml"
     assert config_path("pid", "policy") == CONFIG_DIR / "policy" / "pid.yaml"
@@ -162,6 +169,7 @@ def test_every_shipped_policy_config_builds_a_baseline():
         "open_loop": make_baseline("open-loop", eel, config="open_loop"),
         "decentralized": make_baseline("decentralized", eel, config="decentralized"),
         "inching": make_baseline("inching-pid", worm, config="inching"),
+        "los": make_baseline("los", gym.make("SoftEelPath-v0"), config="los"),
     }
     for name, policy in built.items():
         data = load_yaml(shipped_configs("policy")[name])
@@ -172,6 +180,9 @@ def test_every_shipped_policy_config_builds_a_baseline():
                 else getattr(policy.params, key) == value
             ), (name, key)
     assert built["pid_soft"].params.Kd == 2.0 and built["pid"].params.Kd == 1.0
+    default = make_baseline("los", gym.make("SoftEelGoal-v0")).params  # the file holds the defaults
+    for key in ("Kp_heading", "Kd_heading", "gamma_max", "tau", "lookahead", "sigma", "Kp", "Kd", "Ki"):
+        assert getattr(built["los"].params, key) == getattr(default, key), key
     assert set(BASELINES) >= {"pid", "open-loop", "decentralized", "inching-pid"}
 
 
@@ -200,7 +211,7 @@ def test_the_cli_takes_shipped_names_and_lists_them_for_an_unknown_one(capsys):
     assert err.startswith(
         "soft-snake evaluate: error: policy config 'pid_sof' is neither a file nor a config "
         "shipped with the package (did you mean 'pid_soft'?); shipped policy configs: "
-        "decentralized, inching, open_loop, pid, pid_soft"
+        "decentralized, inching, los, open_loop, pid, pid_soft"
     )
     code = main(
         [

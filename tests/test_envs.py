@@ -25,6 +25,7 @@ from soft_snake_gym.physics import layout as L
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "soft_snake_gym" / "configs" / "env"
 IDS = ["SoftEel-v0", "SoftWorm-v0"]
+NAV_IDS = ["SoftEelGoal-v0", "SoftEelPath-v0"]  # the navigation tasks (tests/test_navigation.py)
 G = 9.81
 
 
@@ -65,6 +66,8 @@ def test_ids_registered_with_time_limit_and_repeatable_registration():
     soft_snake_gym.envs.register_envs()  # a second registration must be harmless
     for env_id in IDS:
         assert gym.spec(env_id).max_episode_steps == 1000
+    for env_id in NAV_IDS:  # 30 s to turn and reach a target or a path
+        assert gym.spec(env_id).max_episode_steps == 3000
     env = gym.make("SoftEel-v0")
     assert isinstance(env.unwrapped, SwimEnv)
     assert isinstance(env.unwrapped.sim, Simulator)
@@ -85,7 +88,7 @@ def test_make_with_module_prefix_imports_the_package():
     assert out.stdout.strip() == "SwimEnv (28,)"
 
 
-@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("env_id", IDS + NAV_IDS)
 def test_gymnasium_check_env_without_warnings(env_id):
     from gymnasium.utils.env_checker import check_env
 
@@ -95,7 +98,7 @@ def test_gymnasium_check_env_without_warnings(env_id):
         check_env(env.unwrapped)  # includes the rgb_array render check through env.spec
 
 
-@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("env_id", IDS + NAV_IDS)
 def test_sb3_check_env_without_warnings(env_id):
     from stable_baselines3.common.env_checker import check_env
 
@@ -169,10 +172,10 @@ def test_observation_blocks_hold_the_simulator_quantities():
 
 
 # --- determinism and pickling ------------------------------------------------------------------
-@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("env_id", IDS + NAV_IDS)
 @pytest.mark.parametrize("randomize", [False, True])
 def test_exact_determinism_of_a_200_step_random_rollout(env_id, randomize):
-    medium = {"rho": [900.0, 1100.0]} if env_id == "SoftEel-v0" else {"mu_s": [0.9, 1.2]}
+    medium = {"rho": [900.0, 1100.0]} if env_id != "SoftWorm-v0" else {"mu_s": [0.9, 1.2]}
     kwargs = {"randomize": {"E": [1.5e6, 2.5e6], **medium}} if randomize else {}
     a = rollout(gym.make(env_id, **kwargs), seed=7, n=200)
     b = rollout(gym.make(env_id, **kwargs), seed=7, n=200)
@@ -183,7 +186,7 @@ def test_exact_determinism_of_a_200_step_random_rollout(env_id, randomize):
     assert not np.array_equal(a[0][0], c[0][0]), "a different seed must give a different start"
 
 
-@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("env_id", IDS + NAV_IDS)
 def test_pickle_round_trip_continues_identically(env_id):
     env = gym.make(env_id, render_mode="rgb_array")
     env.reset(seed=11)

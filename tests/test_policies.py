@@ -19,6 +19,7 @@ from soft_snake_gym.policies import (
     DecentralizedPhasePID,
     InchingPID,
     InchingWave,
+    LOSGuidance,
     OpenLoopSerpenoid,
     PolicyEnvMismatch,
     parse_policy_spec,
@@ -153,6 +154,7 @@ def test_spec_parsing_and_errors():
         DecentralizedPhasePID,
         InchingWave,
         InchingPID,
+        LOSGuidance,
     }
 
 

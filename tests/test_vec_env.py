@@ -26,6 +26,9 @@ IDS = ["SoftEel-v0", "SoftWorm-v0"]
 ENDS = {
     "SoftEel-v0": dict(max_curvature_rate=30.0, randomize={"E": [1e6, 3e6], "rho": [900, 1100]}),
     "SoftWorm-v0": dict(randomize={"mu_s": [0.8, 1.2], "mu_d": [0.5, 0.8]}, dt=0.02),
+    # targets drawn about the success radius away: some are reached (terminated with success)
+    "SoftEelGoal-v0": dict(max_curvature_rate=30.0, target_distance=[0.25, 0.4], success_radius=0.3),
+    "SoftEelPath-v0": dict(max_curvature_rate=30.0, path="sine", randomize={"E": [1e6, 3e6]}),
 }
 
 
@@ -61,7 +64,8 @@ def test_make_vec_returns_the_batched_env_with_batched_spaces(env_id):
 
 @pytest.mark.parametrize(
     ("env_id", "mode"),
-    [(i, AutoresetMode.NEXT_STEP) for i in IDS] + [("SoftEel-v0", AutoresetMode.SAME_STEP)],
+    [(i, AutoresetMode.NEXT_STEP) for i in IDS + ["SoftEelGoal-v0", "SoftEelPath-v0"]]
+    + [("SoftEel-v0", AutoresetMode.SAME_STEP), ("SoftEelGoal-v0", AutoresetMode.SAME_STEP)],
 )
 def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_id, mode):
     """Robot i seeded s + i, with the same actions, is the single env seeded s + i.
@@ -99,8 +103,8 @@ def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_i
         assert np.array_equal(out_b[1].view(np.int64), out_s[1].view(np.int64))
         ends["terminated"] += int(out_b[2].sum())
         ends["truncated"] += int(out_b[3].sum())
-    if env_id == "SoftEel-v0":
-        assert ends["terminated"] >= 2  # failures happened inside the run
+    if env_id in ("SoftEel-v0", "SoftEelGoal-v0"):
+        assert ends["terminated"] >= 2  # failures (or targets reached) happened inside the run
     assert ends["truncated"] >= 2
 
 

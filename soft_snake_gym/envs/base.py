@@ -79,6 +79,12 @@ class SoftRobotEnv(gym.Env):
     shape_key: ClassVar[str] = "kbar"
     """The rest shape the actions drive (``"kbar"`` or ``"lbar"``), a state entry of ``info``."""
     trail_length: ClassVar[int] = 300
+    view_lengths: ClassVar[float] = 2.0
+    """Width of the rendered view, in body lengths."""
+    task_kind: ClassVar[int] = T.TASK_DIRECTION
+    """What the robot is asked to do (``task.TASK_DIRECTION``, ``TASK_GOAL`` or ``TASK_PATH``)."""
+    terminate_on_success: ClassVar[bool] = False
+    """End the episode (``terminated``) when the task succeeds (a target reached)."""
 
     def __init__(self, render_mode: str | None = None, config: str | Path | None = None, **kwargs: Any):
         """Build the env from a preset, a YAML ``config`` and keywords (see the env's docstring)."""
@@ -144,12 +150,13 @@ class SoftRobotEnv(gym.Env):
         self.render_mode = render_mode
         self._renderer = None
 
+        self.n_path = 2  # vertices of the task's path (a navigation env sets its own)
         self._setup_task()
         self._build_spaces()
         box = self.observation_space
         self._act_shape = self.action_space.shape
         if task is None:
-            task = T.allocate_task(self.N, self._act_shape[0], box.shape[0])
+            task = T.allocate_task(self.N, self._act_shape[0], box.shape[0], n_path=self.n_path)
         self.task = task
         task.low[:] = box.low
         task.high[:] = box.high
@@ -162,6 +169,7 @@ class SoftRobotEnv(gym.Env):
         tp[T.T_WF], tp[T.T_WE] = s.forward_reward_weight, s.energy_cost_weight
         tp[T.T_WC], tp[T.T_FAIL] = s.ctrl_cost_weight, s.failure_cost
         tp[T.T_MASS] = self.total_mass
+        tp[T.T_TASK] = self.task_kind
         self._set_goal(s.goal_direction)
         self._failure: str | None = None
         self._needs_reset = True
@@ -169,6 +177,10 @@ class SoftRobotEnv(gym.Env):
         self._trail_head: deque = deque(maxlen=self.trail_length)
         self.randomized: dict[str, float] = {}
         self.metric_keys = tuple(k or self.medium_energy_key for k in T.METRIC_KEYS)
+        self.term_keys = T.TERM_KEYS
+        if self.task_kind != T.TASK_DIRECTION:
+            self.metric_keys += T.NAV_METRIC_KEYS[self.task_kind]
+            self.term_keys += T.NAV_TERM_KEYS
 
     # --- hooks ------------------------------------------------------------------------------
     def _setup_task(self) -> None:
@@ -219,6 +231,15 @@ class SoftRobotEnv(gym.Env):
         }
         info.update(self._shape_info(raw, shape))
         info["newton_iterations"] = newton_iterations
+        nav = r[T.R_NAV]
+        nav = nav.copy() if isinstance(nav, np.ndarray) else nav  # rows are reused for other entries
+        if self.task_kind == T.TASK_GOAL:
+            info["target_distance"] = nav
+        elif self.task_kind == T.TASK_PATH:
+            info["cross_track_error"] = nav
+        if self.task_kind != T.TASK_DIRECTION:  # SB3's convention, counted by its evaluation
+            success = r[T.R_SUCCESS]
+            info["is_success"] = success > 0.0 if isinstance(success, np.ndarray) else bool(success > 0.0)
         return info
 
     def _own_state_info(self, r: list[float]) -> dict[str, Any]:
@@ -229,6 +250,9 @@ class SoftRobotEnv(gym.Env):
 
     def _check_options(self, body: dict[str, np.ndarray]) -> None:
         """Reject an initial body from ``reset(options=...)`` that violates the env's bounds."""
+
+    def _reset_task(self, rng: np.random.Generator) -> None:
+        """Draw the episode's task (a target, a path) into ``task`` after the body's reset draws."""
 
     # --- gymnasium API --------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -270,6 +294,7 @@ class SoftRobotEnv(gym.Env):
         else:
             body = self._initial_body(self.np_random)
         self.sim.reset(**body)
+        self._reset_task(self.np_random)
 
         self._failure = None
         self._needs_reset = False
@@ -332,7 +357,7 @@ class SoftRobotEnv(gym.Env):
         else:  # the last valid state, in new arrays (returned data must not be shared)
             self.fail(STATUS_REASONS[status])
             info = {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in self._last_state_info.items()}
-        info.update(T.reward_terms(r))
+        info.update(T.reward_terms(r, self.term_keys))
         info["failure"] = self._failure
         info["metrics"] = T.episode_metrics(r, self.metric_keys)
         info["energy"] = self.sim.energy_ledger()
@@ -340,15 +365,17 @@ class SoftRobotEnv(gym.Env):
             self._record_trail()
         if self.render_mode == "human":
             self.render()
-        return task.obs.copy(), r[T.R_REWARD], not ok, False, info
+        terminated = not ok or (self.terminate_on_success and r[T.R_SUCCESS] > 0.0)
+        return task.obs.copy(), r[T.R_REWARD], terminated, False, info
 
     def render(self):
         """The current frame.
 
         An (H, W, 3) uint8 RGB array with ``render_mode="rgb_array"``; with ``"human"``, draws into
         a window and returns None. The picture shows the body (head in red), the recent trails of
-        the centre of mass and the head, the goal direction, the time and, on the ground, the nodes
-        stuck to the floor.
+        the centre of mass and the head, the goal direction, the time, on the ground the nodes
+        stuck to the floor, and in a navigation task the target (with its success radius) or the
+        path.
         """
         if self.render_mode is None:
             gym.logger.warn(
@@ -362,17 +389,23 @@ class SoftRobotEnv(gym.Env):
                 ground=self.medium == "ground",
                 body_length=self.base_config.rod.length,
                 fps=self.metadata["render_fps"],
+                view_lengths=self.view_lengths,
             )
         return self._renderer.draw(
             self.sim.x if self._failure is None else self._last_x,
             np.asarray(self._trail_com),
             np.asarray(self._trail_head),
             self.sim.time,
-            self._goal,
+            self.task.tp[T.T_GCOS : T.T_GSIN + 1].copy(),  # the target's bearing, the path's direction
             self.env_id,
             self._failure,
             self.sim.stuck if self._failure is None and self.medium == "ground" else None,
+            **self._render_task(),
         )
+
+    def _render_task(self) -> dict[str, Any]:
+        """What the renderer draws of the task besides the goal direction (a target, a path)."""
+        return {}
 
     @property
     def failure(self) -> str | None:

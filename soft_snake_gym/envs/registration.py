@@ -12,30 +12,48 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-__all__ = ["ENV_IDS", "VECTOR_ENTRY_POINTS", "MAX_EPISODE_STEPS", "importable_id", "register_envs"]
+__all__ = [
+    "ENV_IDS",
+    "EPISODE_STEPS",
+    "VECTOR_ENTRY_POINTS",
+    "MAX_EPISODE_STEPS",
+    "importable_id",
+    "register_envs",
+]
 
 MAX_EPISODE_STEPS = 1000
 ENV_IDS = {
     "SoftEel-v0": "soft_snake_gym.envs.swim:SwimEnv",
     "SoftWorm-v0": "soft_snake_gym.envs.inch:InchEnv",
+    "SoftEelGoal-v0": "soft_snake_gym.envs.navigate:GoalEnv",
+    "SoftEelPath-v0": "soft_snake_gym.envs.navigate:PathEnv",
 }
 VECTOR_ENTRY_POINTS = {
     "SoftEel-v0": "soft_snake_gym.envs.vector:SwimVectorEnv",
     "SoftWorm-v0": "soft_snake_gym.envs.vector:InchVectorEnv",
+    "SoftEelGoal-v0": "soft_snake_gym.envs.vector:GoalVectorEnv",
+    "SoftEelPath-v0": "soft_snake_gym.envs.vector:PathVectorEnv",
 }
+EPISODE_STEPS = {
+    "SoftEel-v0": MAX_EPISODE_STEPS,
+    "SoftWorm-v0": MAX_EPISODE_STEPS,
+    "SoftEelGoal-v0": 3000,
+    "SoftEelPath-v0": 3000,
+}
+"""Steps per episode of each id (``TimeLimit``): 10 s, or 30 s to steer to a target or onto a path."""
 
 
 def register_envs() -> None:
-    """Register ``SoftEel-v0`` and ``SoftWorm-v0`` unless already registered.
+    """Register ``SoftEel-v0``, ``SoftWorm-v0``, ``SoftEelGoal-v0``, ``SoftEelPath-v0`` unless already registered.
 
-    1000 steps each, with their batched vector entry points.
+    :data:`EPISODE_STEPS` steps each, with their batched vector entry points.
     """
     for env_id, entry_point in ENV_IDS.items():
         if env_id not in gym.registry:
             gym.register(
                 id=env_id,
                 entry_point=entry_point,
-                max_episode_steps=MAX_EPISODE_STEPS,
+                max_episode_steps=EPISODE_STEPS[env_id],
                 vector_entry_point=VECTOR_ENTRY_POINTS[env_id],
             )
 

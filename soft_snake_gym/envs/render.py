@@ -45,6 +45,7 @@ class BodyRenderer:
             scale bar.
         fps: frames per second of the window in human mode.
         size: image width and height in pixels.
+        view_lengths: width of the view in body lengths.
     """
 
     def __init__(
@@ -54,6 +55,7 @@ class BodyRenderer:
         body_length: float = 1.62,
         fps: int = 100,
         size: tuple[int, int] = (480, 360),
+        view_lengths: float = 2.0,
     ) -> None:
         """Build the figure (arguments in the class docstring)."""
         from matplotlib.figure import Figure
@@ -77,7 +79,7 @@ class BodyRenderer:
         ax = self.ax = self.fig.add_subplot(1, 1, 1)
         ax.set_facecolor(_GROUND if ground else _WATER)
         ax.set_aspect("equal")
-        self.width = 2.0 * body_length
+        self.width = view_lengths * body_length
         self.height = self.width * size[1] / size[0]
         bar = self._bar_length = _nice_length(0.25 * self.width)
         from matplotlib.ticker import MultipleLocator
@@ -95,6 +97,9 @@ class BodyRenderer:
         (self._stuck,) = ax.plot([], [], "s", color="#ff7f0e", ms=6, zorder=5)
         (self._head,) = ax.plot([], [], "o", color="#d62728", ms=7, zorder=5)
         (self._com,) = ax.plot([], [], "+", color="black", ms=12, mew=2, zorder=6)
+        (self._path,) = ax.plot([], [], "--", color="#2ca02c", lw=1.5, zorder=2)
+        (self._target,) = ax.plot([], [], "*", color="#2ca02c", ms=14, zorder=6)
+        self._radius = None
         self._goal = None
         (self._scale,) = ax.plot([], [], color="black", lw=2.5, zorder=6)
         self._scale_text = ax.text(0, 0, f"{bar:g} m", ha="center", va="bottom", fontsize=9, zorder=6)
@@ -131,6 +136,9 @@ class BodyRenderer:
         title: str = "",
         failure: str | None = None,
         stuck: np.ndarray | None = None,
+        target: np.ndarray | None = None,
+        target_radius: float = 0.0,
+        path: np.ndarray | None = None,
     ) -> np.ndarray | None:
         """Draw one frame.
 
@@ -144,6 +152,10 @@ class BodyRenderer:
             title: shown next to the time.
             failure: a failure reason to show, if any.
             stuck: which nodes stick to the ground, (N,) bool, drawn as orange squares.
+            target: a target point, (2,) [m], drawn as a green star with a circle of
+                ``target_radius`` [m] around it.
+            target_radius: the target's success radius [m].
+            path: a path to follow, (M, 2) [m], drawn as a dashed green line.
 
         Returns:
             The image, (height, width, 3) uint8, off-screen; ``None`` in human mode.
@@ -158,6 +170,17 @@ class BodyRenderer:
         if len(trail_com):
             self._trail_com.set_data(trail_com[:, 0], trail_com[:, 1])
             self._trail_head.set_data(trail_head[:, 0], trail_head[:, 1])
+        if path is not None:
+            self._path.set_data(path[:, 0], path[:, 1])
+        if target is not None:
+            from matplotlib.patches import Circle  # matplotlib loads only when drawing
+
+            self._target.set_data([target[0]], [target[1]])
+            if self._radius is not None:
+                self._radius.remove()
+            self._radius = self.ax.add_patch(
+                Circle(tuple(target), target_radius, fill=False, color="#2ca02c", lw=1.0, ls=":")
+            )
         x0, x1 = com[0] - 0.5 * self.width, com[0] + 0.5 * self.width
         y0, y1 = com[1] - 0.5 * self.height, com[1] + 0.5 * self.height
         self.ax.set_xlim(x0, x1)

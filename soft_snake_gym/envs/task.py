@@ -39,6 +39,8 @@ __all__ = [
     "reward_terms",
     "episode_metrics",
     "METRIC_KEYS",
+    "NAV_METRIC_KEYS",
+    "NAV_TERM_KEYS",
     "TERM_KEYS",
 ]
 
@@ -64,8 +66,21 @@ ENERGY_ACTUATOR, ENERGY_MEDIUM = 0, 1
     T_FAIL,
     T_ESRC,
     T_MASS,
-) = range(15)
-N_TP = 15
+    T_TASK,
+    T_TX,
+    T_TY,
+    T_RADIUS,
+    T_BONUS,
+    T_WXTE,
+    T_NPATH,
+) = range(22)
+N_TP = 22
+
+# --- what the robot is asked to do: tp[T_TASK] ------------------------------------------------
+TASK_DIRECTION, TASK_GOAL, TASK_PATH = 0, 1, 2
+"""Swim along a fixed direction (``SoftEel-v0``), reach a target point, follow a path."""
+SEARCH_WINDOW = 16
+"""Segments searched on either side of the last closest one when the robot follows a path."""
 
 # --- task state rs ----------------------------------------------------------------------------
 (
@@ -84,17 +99,36 @@ N_TP = 15
     R_RE,
     R_RC,
     R_RFAIL,
+    R_RXTE,
+    R_RSUCC,
     R_REWARD,
-) = range(16)
-M0 = 16
-(M_AVG, M_DIST, M_DISP, M_DUR, M_COT, M_EMED, M_EACT, M_WACT) = range(M0, M0 + 8)
-N_RS = M0 + 8
+    R_NAV,
+    R_S,
+    R_S0,
+    R_SEG,
+    R_SUCCESS,
+    R_XINT,
+) = range(24)
+M0 = 24
+(M_AVG, M_DIST, M_DISP, M_DUR, M_COT, M_EMED, M_EACT, M_WACT, M_N1, M_N2, M_N3) = range(M0, M0 + 11)
+N_RS = M0 + 11
 
 BAD_ACTION = -1
 """Status of a step refused because the action has a non-finite entry (nothing was stepped)."""
 
 TERM_KEYS = ("reward_forward", "reward_energy", "reward_ctrl", "reward_failure")
 """Names of the reward terms ``rs[R_RF:R_RFAIL+1]``."""
+
+NAV_TERM_KEYS = ("reward_cross_track", "reward_success")
+"""Names of the navigation tasks' extra reward terms ``rs[R_RXTE:R_RSUCC+1]``."""
+
+NAV_METRIC_KEYS = {
+    TASK_GOAL: ("success", "time_to_goal", "target_distance"),
+    TASK_PATH: ("cross_track_error", "final_cross_track_error"),
+}
+"""Names of the navigation tasks' extra metrics ``rs[M_N1:]``, after :data:`METRIC_KEYS`: whether
+the target was reached (0/1), when [s] (inf until then) and the distance left to it [m]; the
+path's cross-track error [m], its mean over the episode and its value now (absolute)."""
 
 METRIC_KEYS = (
     "average_speed",
@@ -127,6 +161,9 @@ class TaskArrays(NamedTuple):
         low, high: bounds of the observation, (n_obs,).
         raw: the observation unclipped, float64, (n_obs,).
         obs: the observation, float32, (n_obs,).
+        path: the path to follow as a polyline (``TASK_PATH``): rows ``(x, y, s)``, a vertex [m]
+            and its arc length from the first one [m], (n_path, 3); the first segment extends
+            backwards and the last forwards without end.
     """
 
     tp: np.ndarray
@@ -139,14 +176,15 @@ class TaskArrays(NamedTuple):
     high: np.ndarray
     raw: np.ndarray
     obs: np.ndarray
+    path: np.ndarray
 
     def row(self, i: int) -> TaskArrays:
         """Robot ``i`` of stacked arrays: views, so writes go to the batch."""
         return TaskArrays(*(a[i] for a in self))
 
 
-def allocate_task(N: int, n_act: int, n_obs: int, batch: tuple[int, ...] = ()) -> TaskArrays:
-    """Zeroed :class:`TaskArrays` of ``batch`` robots of N nodes."""
+def allocate_task(N: int, n_act: int, n_obs: int, batch: tuple[int, ...] = (), n_path: int = 2) -> TaskArrays:
+    """Zeroed :class:`TaskArrays` of ``batch`` robots of N nodes (paths of ``n_path`` vertices)."""
     return TaskArrays(
         tp=np.zeros(batch + (N_TP,)),
         rs=np.zeros(batch + (N_RS,)),
@@ -158,16 +196,18 @@ def allocate_task(N: int, n_act: int, n_obs: int, batch: tuple[int, ...] = ()) -
         high=np.zeros(batch + (n_obs,)),
         raw=np.zeros(batch + (n_obs,)),
         obs=np.zeros(batch + (n_obs,), dtype=np.float32),
+        path=np.zeros(batch + (n_path, 3)),
     )
 
 
-def reward_terms(r: Any) -> dict[str, Any]:
+def reward_terms(r: Any, keys: tuple[str, ...] = TERM_KEYS) -> dict[str, Any]:
     """The forward speed [m/s] and the reward terms of the last step, by name, from ``rs``.
 
-    ``rs`` is a list for one robot, or ``rs.T``, rows over robots, for a batch.
+    ``rs`` is a list for one robot, or ``rs.T``, rows over robots, for a batch; ``keys`` are
+    :data:`TERM_KEYS`, followed by :data:`NAV_TERM_KEYS` in a navigation task.
     """
     terms = {"forward_speed": r[R_FWD]}
-    terms.update(zip(TERM_KEYS, r[R_RF : R_RFAIL + 1], strict=True))
+    terms.update(zip(keys, r[R_RF : R_RF + len(keys)], strict=True))
     return terms
 
 
@@ -176,12 +216,14 @@ def episode_metrics(r: Any, keys: tuple[str, ...]) -> dict[str, Any]:
 
     ``keys`` are :data:`METRIC_KEYS` with the medium's energy named.
     """
-    return dict(zip(keys, r[M_AVG:], strict=True))
+    return dict(zip(keys, r[M_AVG : M_AVG + len(keys)], strict=True))
 
 
 @njit(cache=True, error_model="numpy")
 def _observe(s, t):
     if int(t.tp[T_KIND]) == SWIM:
+        if int(t.tp[T_TASK]) != TASK_DIRECTION:  # the distance to the target or the cross-track error
+            t.raw[t.raw.size - 1] = t.rs[R_NAV]
         return observe.swim_observation(s.q, s.v, s.kbar, t.w, t.tp[T_GOAL], t.low, t.high, t.raw, t.obs)
     ground = int(s.prm[L.P_MEDIUM]) == L.MEDIUM_GROUND
     return observe.inch_observation(
@@ -201,12 +243,77 @@ def _com(q, w):
 
 
 @njit(cache=True, error_model="numpy")
+def _navigate(tp, rs, path, x, y, search_all):
+    """Where the robot at ``(x, y)`` stands in a navigation task; sets the direction to steer.
+
+    To a target (``TASK_GOAL``): ``rs[R_NAV]`` the distance to it [m], ``rs[R_S]`` its negative (so
+    that progress is ``rs[R_S] - rs[R_S0]``), the goal direction ``tp[T_GOAL]`` the bearing of the
+    target from ``(x, y)``. Along a path (``TASK_PATH``): the closest point of the polyline ``path``
+    (among the segments within :data:`SEARCH_WINDOW` of the last closest one, or all if
+    ``search_all``), ``rs[R_NAV]`` the signed cross-track error (positive with the path on the
+    robot's right, looking along the path) [m], ``rs[R_S]`` the arc length of the closest point
+    [m], ``rs[R_SEG]`` its segment, and the goal direction the segment's direction.
+    """
+    if int(tp[T_TASK]) == TASK_GOAL:
+        dx = tp[T_TX] - x
+        dy = tp[T_TY] - y
+        d = math.hypot(dx, dy)
+        rs[R_NAV] = d
+        rs[R_S] = -d
+        direction = math.atan2(dy, dx)
+    else:
+        nseg = int(tp[T_NPATH]) - 1
+        lo, hi = 0, nseg
+        if not search_all:
+            k = int(rs[R_SEG])
+            lo, hi = max(0, k - SEARCH_WINDOW), min(nseg, k + SEARCH_WINDOW + 1)
+        best, kb, tb = math.inf, lo, 0.0
+        for k in range(lo, hi):
+            ux = path[k + 1, 0] - path[k, 0]
+            uy = path[k + 1, 1] - path[k, 1]
+            f = ((x - path[k, 0]) * ux + (y - path[k, 1]) * uy) / (ux * ux + uy * uy)
+            if k > 0 and f < 0.0:  # the first segment extends backwards, the last forwards
+                f = 0.0
+            if k < nseg - 1 and f > 1.0:
+                f = 1.0
+            dist = math.hypot(x - path[k, 0] - f * ux, y - path[k, 1] - f * uy)
+            if dist < best:
+                best, kb, tb = dist, k, f
+        ux = path[kb + 1, 0] - path[kb, 0]
+        uy = path[kb + 1, 1] - path[kb, 1]
+        length = math.hypot(ux, uy)
+        cross = (ux * (y - path[kb, 1]) - uy * (x - path[kb, 0])) / length
+        rs[R_NAV] = best if cross >= 0.0 else -best
+        rs[R_S] = path[kb, 2] + tb * length
+        rs[R_SEG] = kb
+        direction = math.atan2(uy, ux)
+    tp[T_GOAL] = direction
+    tp[T_GCOS] = math.cos(direction)
+    tp[T_GSIN] = math.sin(direction)
+
+
+@njit(cache=True, error_model="numpy")
 def _metrics(out, prm, tp, rs):
-    """Episode averages of docs/model.md §8 from the accumulated energies and the centre of mass."""
+    """Episode averages of docs/model.md §8 from the accumulated energies and the centre of mass.
+
+    The distance is the progress toward the goal: along the goal direction, or, in a navigation
+    task, toward the target or along the path (``rs[R_S] - rs[R_S0]``); the task's own metrics
+    go to ``rs[M_N1:]`` (:data:`NAV_METRIC_KEYS`).
+    """
     dx = rs[R_COMX] - rs[R_COM0X]
     dy = rs[R_COMY] - rs[R_COM0Y]
-    distance = dx * tp[T_GCOS] + dy * tp[T_GSIN]
+    task = int(tp[T_TASK])
+    if task == TASK_DIRECTION:
+        distance = dx * tp[T_GCOS] + dy * tp[T_GSIN]
+    else:
+        distance = rs[R_S] - rs[R_S0]
     duration = out[L.O_NSTEPS] * prm[L.P_H]
+    if task == TASK_GOAL:
+        rs[M_N1] = rs[R_SUCCESS]
+        rs[M_N3] = rs[R_NAV]
+    elif task == TASK_PATH:
+        rs[M_N1] = rs[R_XINT] / duration if duration > 0.0 else abs(rs[R_NAV])
+        rs[M_N2] = abs(rs[R_NAV])
     ground = int(prm[L.P_MEDIUM]) == L.MEDIUM_GROUND
     rs[M_AVG] = distance / duration if duration > 0.0 else 0.0
     rs[M_DIST] = distance
@@ -231,6 +338,10 @@ def robot_reset(s, t):
     x, y = _com(s.q, t.w)
     rs[R_COMX] = rs[R_COM0X] = x
     rs[R_COMY] = rs[R_COM0Y] = y
+    if int(t.tp[T_TASK]) != TASK_DIRECTION:
+        _navigate(t.tp, rs, t.path, x, y, True)
+        rs[R_S0] = rs[R_S]
+        rs[M_N2] = math.inf  # time to goal: not reached yet
     _metrics(s.out, s.prm, t.tp, rs)
     rs[R_HEADING] = _observe(s, t)
 
@@ -267,9 +378,26 @@ def robot_step(s, t):
     status = stepper.simulate(s, uk, ul, nsub)
     rs[R_STATUS] = status
     rs[R_ASQ] = sq
+    task = int(tp[T_TASK])
+    xte = 0.0
+    bonus = 0.0
     if status == L.OK:
         x, y = _com(q, w)
-        fwd = ((x - rs[R_COMX]) * tp[T_GCOS] + (y - rs[R_COMY]) * tp[T_GSIN]) / dt
+        if task == TASK_DIRECTION:
+            fwd = ((x - rs[R_COMX]) * tp[T_GCOS] + (y - rs[R_COMY]) * tp[T_GSIN]) / dt
+        else:  # progress toward the target or along the path
+            s_old = rs[R_S]
+            _navigate(tp, rs, t.path, x, y, False)
+            fwd = (rs[R_S] - s_old) / dt
+            if task == TASK_GOAL:
+                if rs[R_SUCCESS] == 0.0 and rs[R_NAV] <= tp[T_RADIUS]:
+                    rs[R_SUCCESS] = 1.0
+                    bonus = tp[T_BONUS]
+                    rs[M_N2] = out[L.O_NSTEPS] * prm[L.P_H]
+            else:
+                xte = abs(rs[R_NAV])
+                rs[R_XINT] += xte * dt
+                rs[R_SUCCESS] = 1.0 if xte <= tp[T_RADIUS] else 0.0
         d_med = (out[L.O_E_FRICTION] if ground else out[L.O_E_FLUID]) - e_med0
         if int(tp[T_ESRC]) == ENERGY_MEDIUM:
             epow = d_med / dt
@@ -294,7 +422,9 @@ def robot_step(s, t):
     rs[R_RE] = -tp[T_WE] * epow
     rs[R_RC] = -tp[T_WC] * sq
     rs[R_RFAIL] = -tp[T_FAIL] if status != L.OK else 0.0
-    rs[R_REWARD] = rs[R_RF] + rs[R_RE] + rs[R_RC] + rs[R_RFAIL]
+    rs[R_RXTE] = -tp[T_WXTE] * xte
+    rs[R_RSUCC] = bonus
+    rs[R_REWARD] = rs[R_RF] + rs[R_RE] + rs[R_RC] + rs[R_RFAIL] + rs[R_RXTE] + rs[R_RSUCC]
     return status
 
 
@@ -304,7 +434,17 @@ def _robot(s, t, i):
     return (
         SimArrays(s.q[i], s.v[i], s.kbar[i], s.lbar[i], s.prm[i], s.buf[i], s.J[i], s.ibuf[i], s.out[i]),
         TaskArrays(
-            t.tp[i], t.rs[i], t.act[i], t.uk[i], t.ul[i], t.w[i], t.low[i], t.high[i], t.raw[i], t.obs[i]
+            t.tp[i],
+            t.rs[i],
+            t.act[i],
+            t.uk[i],
+            t.ul[i],
+            t.w[i],
+            t.low[i],
+            t.high[i],
+            t.raw[i],
+            t.obs[i],
+            t.path[i],
         ),
     )
 

@@ -30,7 +30,8 @@ from gymnasium.vector.utils import batch_space
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.base import SoftRobotEnv
 from soft_snake_gym.envs.inch import InchEnv
-from soft_snake_gym.envs.registration import MAX_EPISODE_STEPS
+from soft_snake_gym.envs.navigate import GoalEnv, PathEnv
+from soft_snake_gym.envs.registration import EPISODE_STEPS
 from soft_snake_gym.envs.settings import resolve_settings
 from soft_snake_gym.envs.swim import SwimEnv
 from soft_snake_gym.envs.task import TaskArrays
@@ -47,9 +48,22 @@ from soft_snake_gym.physics.layout import (
     STATUS_REASONS,
 )
 
-__all__ = ["RobotBatch", "SoftVectorEnv", "SwimVectorEnv", "InchVectorEnv", "ENV_CLASSES"]
+__all__ = [
+    "RobotBatch",
+    "SoftVectorEnv",
+    "SwimVectorEnv",
+    "InchVectorEnv",
+    "GoalVectorEnv",
+    "PathVectorEnv",
+    "ENV_CLASSES",
+]
 
-ENV_CLASSES: dict[str, type[SoftRobotEnv]] = {"SoftEel-v0": SwimEnv, "SoftWorm-v0": InchEnv}
+ENV_CLASSES: dict[str, type[SoftRobotEnv]] = {
+    "SoftEel-v0": SwimEnv,
+    "SoftWorm-v0": InchEnv,
+    "SoftEelGoal-v0": GoalEnv,
+    "SoftEelPath-v0": PathEnv,
+}
 
 ROBOTS_PER_THREAD = 64
 """Default threads: one per this many robots, at most ``NUMBA_NUM_THREADS``."""
@@ -94,10 +108,13 @@ class SoftVectorEnv(VectorEnv):
     robot), as ``SyncVectorEnv`` does; later autoresets continue each robot's own generator.
 
     Args:
-        env_id: ``"SoftEel-v0"`` or ``"SoftWorm-v0"``.
+        env_id: a key of :data:`ENV_CLASSES` (``"SoftEel-v0"``, ``"SoftWorm-v0"``,
+            ``"SoftEelGoal-v0"``, ``"SoftEelPath-v0"``).
         num_envs: number of robots (>= 1).
         max_episode_steps: truncate an episode after this many steps, as ``TimeLimit`` does
-            for ``gym.make`` (default 1000, the ids' registered limit); ``None``: never.
+            for ``gym.make`` (default ``"registered"``: the id's registered limit, 1000 steps, 3000
+            for the navigation tasks); ``None``: never. An episode that succeeds at its task
+            (a target reached) is terminated, as the single env's is.
         num_threads: numba threads for the batched step (default: one per 64 robots, at most
             ``NUMBA_NUM_THREADS``; 1 runs on the calling thread). Robots are independent, so
             results do not depend on it. Threads help only on otherwise idle cores: on busy cores
@@ -117,7 +134,7 @@ class SoftVectorEnv(VectorEnv):
         env_id: str | None = None,
         num_envs: int = 1,
         *,
-        max_episode_steps: int | None = MAX_EPISODE_STEPS,
+        max_episode_steps: int | str | None = "registered",
         num_threads: int | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
@@ -131,6 +148,8 @@ class SoftVectorEnv(VectorEnv):
         self.env_id = env_id
         env_cls = ENV_CLASSES[env_id]
         n = check_int("num_envs", num_envs, 1, hint="the number of robots")
+        if max_episode_steps == "registered":
+            max_episode_steps = EPISODE_STEPS[env_id]
         if max_episode_steps is not None:
             max_episode_steps = check_int(
                 "max_episode_steps", max_episode_steps, 1, hint="or None for no time limit"
@@ -178,7 +197,8 @@ class SoftVectorEnv(VectorEnv):
         sims = tuple(Simulator(base_config, arrays=sim_arrays.row(i)) for i in range(n))
         proto = env_cls.over_arrays(settings, sims[0], None)
         n_act, n_obs = proto.action_space.shape[0], proto.observation_space.shape[0]
-        self.batch = RobotBatch(sim=sim_arrays, task=T.allocate_task(proto.N, n_act, n_obs, (n,)), sims=sims)
+        task = T.allocate_task(proto.N, n_act, n_obs, (n,), n_path=proto.n_path)
+        self.batch = RobotBatch(sim=sim_arrays, task=task, sims=sims)
         """The robots' stacked arrays (:class:`RobotBatch`); read-only for users."""
         self.envs: list[SoftRobotEnv] = [
             env_cls.over_arrays(settings, sim, self.batch.task.row(i)) for i, sim in enumerate(sims)
@@ -326,6 +346,8 @@ class SoftVectorEnv(VectorEnv):
         if terminated.any():
             for i in np.flatnonzero(terminated):
                 self.envs[i].fail(STATUS_REASONS[status[i]])
+        if self._proto.terminate_on_success:
+            terminated |= stepping & (self.batch.task.rs[:, T.R_SUCCESS] > 0.0)
         rewards = self.rewards
         if stepping.all():
             self._elapsed += 1
@@ -415,7 +437,7 @@ class SoftVectorEnv(VectorEnv):
             if not stepped.all():
                 rows[T.R_FWD :, ~stepped] = 0.0
             mask = stepped.copy()
-            for key, value in T.reward_terms(rows).items():
+            for key, value in T.reward_terms(rows, self._proto.term_keys).items():
                 infos[key], infos[f"_{key}"] = value, mask
             metrics: dict[str, Any] = {}
             for key, value in T.episode_metrics(rows, self.metric_keys).items():
@@ -459,3 +481,23 @@ class InchVectorEnv(SoftVectorEnv):
     def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
         """Build ``num_envs`` SoftWorm-v0 robots (keywords as for :class:`SoftVectorEnv`)."""
         super().__init__("SoftWorm-v0", num_envs, **kwargs)
+
+
+class GoalVectorEnv(SoftVectorEnv):
+    """:class:`SoftVectorEnv` of ``SoftEelGoal-v0`` (its ``vector_entry_point``)."""
+
+    env_id = "SoftEelGoal-v0"
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        """Build ``num_envs`` SoftEelGoal-v0 robots (keywords as for :class:`SoftVectorEnv`)."""
+        super().__init__("SoftEelGoal-v0", num_envs, **kwargs)
+
+
+class PathVectorEnv(SoftVectorEnv):
+    """:class:`SoftVectorEnv` of ``SoftEelPath-v0`` (its ``vector_entry_point``)."""
+
+    env_id = "SoftEelPath-v0"
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        """Build ``num_envs`` SoftEelPath-v0 robots (keywords as for :class:`SoftVectorEnv`)."""
+        super().__init__("SoftEelPath-v0", num_envs, **kwargs)

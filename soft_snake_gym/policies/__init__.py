@@ -21,6 +21,7 @@ from soft_snake_gym.policies.base import (
 )
 from soft_snake_gym.policies.decentralized import DecentralizedPhasePID
 from soft_snake_gym.policies.inching import InchingPID, InchingWave
+from soft_snake_gym.policies.los import HeadingController, LOSGuidance
 from soft_snake_gym.policies.open_loop import OpenLoopSerpenoid
 from soft_snake_gym.policies.pid import CurvaturePID
 
@@ -30,6 +31,8 @@ __all__ = [
     "CurvaturePID",
     "DecentralizedPhasePID",
     "EnvLayout",
+    "HeadingController",
+    "LOSGuidance",
     "InchingPID",
     "InchingWave",
     "OpenLoopSerpenoid",
@@ -47,6 +50,7 @@ BASELINES: dict[str, type[BaselinePolicy]] = {
     "decentralized": DecentralizedPhasePID,
     "inching": InchingWave,
     "inching-pid": InchingPID,
+    "los": LOSGuidance,
 }
 
 

@@ -1,7 +1,7 @@
 """Decentralized phase PID (docs/model.md §7): no shared clock, each node sees its head-ward neighbour.
 
 Node j estimates its own phase from its turning angle and rate,
-``psihat_j = atan2(phi_j, phi_dot_j / omega)``, and takes its reference phase from the
+``psihat_j = atan2(phi_j - gamma, phi_dot_j / omega)`` (gamma: the turning bias, 0 by default), and takes its reference phase from the
 neighbour toward the head, ``psi_j = psihat_(j+1) - delta``. The head-most interior node
 closes the chain either *circulant* (``psi_(N-2) = psihat_1 - delta``, exact when
 ``delta (N-2)`` is a multiple of 2 pi) or *pacemaker* (it runs the clock). The same PID law
@@ -43,11 +43,17 @@ class DecentralizedParams(PIDParams):
             raise ValueError(f"closure = {self.closure!r} must be 'circulant' or 'pacemaker'")
 
 
-def estimate_phase(kappa: np.ndarray, kappa_dot: np.ndarray, omega: float) -> np.ndarray:
-    """``psihat = atan2(phi, phi_dot / omega)`` with ``phi = 2 atan(kappa / 2)`` (docs/model.md §7)."""
+def estimate_phase(
+    kappa: np.ndarray, kappa_dot: np.ndarray, omega: float, gamma: float | np.ndarray = 0.0
+) -> np.ndarray:
+    """``psihat = atan2(phi - gamma, phi_dot / omega)`` with ``phi = 2 atan(kappa / 2)`` (docs/model.md §7).
+
+    The turning bias ``gamma`` [rad] (per node: a float or (n_envs, 1)) is taken off the turning
+    angle first: the gait's ``phi = alpha sin(psi) + gamma`` oscillates about it.
+    """
     phi = 2.0 * np.arctan(0.5 * kappa)
     phi_dot = 4.0 * kappa_dot / (kappa * kappa + 4.0)
-    return np.arctan2(phi, phi_dot / omega)
+    return np.arctan2(phi - gamma, phi_dot / omega)
 
 
 class DecentralizedPhasePID(_SerpenoidPolicy):
@@ -69,14 +75,16 @@ class DecentralizedPhasePID(_SerpenoidPolicy):
         t = state[:, 0].copy()
         kappa = self.block(obs, "kappa")
         kappa_dot = self.block(obs, "kappa_dot")
-        psihat = estimate_phase(kappa, kappa_dot, p.omega) if p.omega > 0 else np.zeros_like(kappa)
+        gamma = self.turning_bias(obs, state)
+        psihat = estimate_phase(kappa, kappa_dot, p.omega, gamma) if p.omega > 0 else np.zeros_like(kappa)
         psi = np.empty_like(psihat)
         psi[:, :-1] = psihat[:, 1:] - self.delta
         if p.closure == "circulant":
             psi[:, -1] = psihat[:, 0] - self.delta
         else:
             psi[:, -1] = self.clock_phase(t)[:, -1]
-        kappa_des, kappa_dot_des = self.desired(psi)
-        u = pid_law(self.gait, self.layout.dt, kappa, kappa_dot, kappa_des, kappa_dot_des, state[:, 1:])
+        kappa_des, kappa_dot_des = self.desired(psi, gamma)
+        integral = state[:, 1 : 1 + self.n_outputs]
+        u = pid_law(self.gait, self.layout.dt, kappa, kappa_dot, kappa_des, kappa_dot_des, integral)
         state[:, 0] = t + self.layout.dt
         return u, np.abs(kappa_des - kappa)

@@ -14,7 +14,12 @@ __all__ = ["OpenLoopParams", "OpenLoopSerpenoid", "SerpenoidParams"]
 
 
 class _SerpenoidPolicy(BaselinePolicy):
-    """Shared by the bending controllers: a clock in ``state[:, 0]``."""
+    """Shared by the bending controllers: a clock in ``state[:, 0]``, the turning bias.
+
+    The bias ``gamma`` of the gait (docs/model.md §6) comes from :meth:`turning_bias`: the gait's
+    constant ``gamma`` here, a heading controller's output in
+    :class:`~soft_snake_gym.policies.los.LOSGuidance`.
+    """
 
     Params = SerpenoidParams
     needs = ("kappa", "kappa_dot")
@@ -30,6 +35,8 @@ class _SerpenoidPolicy(BaselinePolicy):
         )
         #: the parameters as each node runs them (alpha, delta, gamma mapped onto arc length).
         self.gait = dataclasses.replace(p, alpha=alpha, delta=self.delta, gamma=gamma)
+        #: per-node angle of a design node's 1 rad (``l / l_d``; 1.0 on an unrefined rod).
+        self.edge_ratio = serpenoid_on_nodes(1.0, 1.0, layout.n_nodes, layout.design_nodes)[0]
         self.state_size = 1 + self.n_outputs
 
     def clock_phase(self, t: np.ndarray) -> np.ndarray:
@@ -37,10 +44,21 @@ class _SerpenoidPolicy(BaselinePolicy):
         p = self.gait
         return serpenoid_phase(0.0, self.n_outputs, 0.0, self.delta, p.psi0)[None, :] + (p.omega * t[:, None])
 
-    def desired(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(kappa_des, kappa_dot_des)`` at phases psi advancing at omega."""
+    def turning_bias(self, obs: np.ndarray, state: np.ndarray) -> float | np.ndarray:
+        """The bias ``gamma`` per node [rad]: a float, or (n_envs, 1) per env; the gait's here."""
+        return self.gait.gamma
+
+    def desired(
+        self, psi: np.ndarray, gamma: float | np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(kappa_des, kappa_dot_des)`` at phases psi advancing at omega.
+
+        With the bias ``gamma`` per node [rad] (a float or (n_envs, 1)); None: the gait's. A bias
+        that changes in time adds ``gamma_dot sec^2(phi_des / 2)`` to the true rate, which is
+        left out: the closed loops correct it.
+        """
         p = self.gait
-        return serpenoid(psi, p.omega, p.alpha, p.gamma)
+        return serpenoid(psi, p.omega, p.alpha, p.gamma if gamma is None else gamma)
 
 
 @dataclass(frozen=True)
@@ -85,7 +103,7 @@ class OpenLoopSerpenoid(_SerpenoidPolicy):
 
     def _control(self, obs, state):
         t = state[:, 0].copy()
-        kappa_des, kappa_dot_des = self.desired(self.clock_phase(t))
+        kappa_des, kappa_dot_des = self.desired(self.clock_phase(t), self.turning_bias(obs, state))
         state[:, 0] = t + self.layout.dt
         u = kappa_dot_des + self.params.rest_gain * (kappa_des - self.block(obs, "kbar"))
         return u, np.abs(kappa_des - self.block(obs, "kappa"))

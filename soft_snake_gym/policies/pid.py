@@ -73,8 +73,8 @@ class CurvaturePID(_SerpenoidPolicy):
     def _control(self, obs, state):
         t = state[:, 0].copy()
         kappa = self.block(obs, "kappa")
-        kappa_des, kappa_dot_des = self.desired(self.clock_phase(t))
-        integral = state[:, 1:]
+        kappa_des, kappa_dot_des = self.desired(self.clock_phase(t), self.turning_bias(obs, state))
+        integral = state[:, 1 : 1 + self.n_outputs]
         u = pid_law(
             self.gait,
             self.layout.dt,

@@ -23,7 +23,7 @@ from soft_snake_gym import plots
 from soft_snake_gym.agents import make_policy
 from soft_snake_gym.config import ConfigError
 from soft_snake_gym.distributed import RAY_INSTALL, RayNotInstalled
-from soft_snake_gym.evaluation import evaluate, make_eval_env, metric_columns, summarize
+from soft_snake_gym.evaluation import NAV_METRICS, evaluate, make_eval_env, metric_columns, summarize
 
 __all__ = [
     "BOOTSTRAP_REPS",
@@ -49,6 +49,8 @@ CHART = ("average_speed", "cost_of_transport", "return")
 DEFAULT_POLICIES = {
     "SoftEel-v0": ["zoo:ppo", "pid", "open-loop"],
     "SoftWorm-v0": ["zoo:ppo", "inching-pid", "inching"],
+    "SoftEelGoal-v0": ["zoo:ppo", "los"],
+    "SoftEelPath-v0": ["los", "pid"],  # no path-following agent is shipped yet (docs/navigation.md)
 }
 
 
@@ -140,6 +142,12 @@ def iqm_intervals(
     return out
 
 
+def _columns(results: dict[str, dict[str, tuple[float, float]]]) -> list[tuple[str, str, str]]:
+    """:data:`METRICS`, then the navigation metrics that some policy's results have."""
+    nav = [n for n in NAV_METRICS if any(n in summary for summary in results.values())]
+    return METRICS + metric_columns(nav)
+
+
 def compare(
     env_id: str,
     specs: list[str],
@@ -192,12 +200,13 @@ def compare(
 def format_comparison(results: dict[str, dict[str, tuple[float, ...]]], title: str = "") -> str:
     """A plain-text table, one row per policy: mean ± std, or a seed set's IQM [95 % CI]."""
     width = max(12, *(len(s) for s in results))
+    columns = _columns(results)
     cell = 30 if any(len(v) == 3 for r in results.values() for v in r.values()) else 24
-    head = f"{'policy':<{width}}" + "".join(f"  {f'{label} [{unit}]':>{cell}}" for _, label, unit in METRICS)
+    head = f"{'policy':<{width}}" + "".join(f"  {f'{label} [{unit}]':>{cell}}" for _, label, unit in columns)
     lines = ([title] if title else []) + [head, "-" * len(head)]
     for spec, summary in results.items():
         cells = []
-        for key, _, _ in METRICS:
+        for key, _, _ in columns:
             value = summary.get(key, (math.nan, math.nan))
             if not math.isfinite(value[0]):
                 text = "n/a"
@@ -218,9 +227,13 @@ def format_comparison(results: dict[str, dict[str, tuple[float, ...]]], title: s
 def plot_comparison(
     results: dict[str, dict[str, tuple[float, ...]]], path: str | Path, title: str = ""
 ) -> Path:
-    """Bar chart of speed, cost of transport and return: mean ± std, or a seed set's IQM and CI."""
-    labels = {k: (label, unit) for k, label, unit in METRICS}
-    return plots.comparison_chart(results, [(k, *labels[k]) for k in CHART], path, title)
+    """Bar chart of speed, cost of transport and return: mean ± std, or a seed set's IQM and CI.
+
+    And of the success rate or the cross-track error in a navigation task.
+    """
+    labels = {k: (label, unit) for k, label, unit in _columns(results)}
+    chart = list(CHART) + [k for k in ("success", "cross_track_error") if k in labels]
+    return plots.comparison_chart(results, [(k, *labels[k]) for k in chart], path, title)
 
 
 def check_figure_path(path: str | Path) -> None:

@@ -45,7 +45,7 @@ from soft_snake_gym import plots
 from soft_snake_gym.agents import make_policy
 from soft_snake_gym.distributed import connected, imap_unordered
 from soft_snake_gym.envs import register_envs
-from soft_snake_gym.evaluation import TABLE, evaluate, make_eval_env, metric_columns
+from soft_snake_gym.evaluation import NAV_METRICS, TABLE, evaluate, make_eval_env, metric_columns
 from soft_snake_gym.gaits import max_serpenoid_amplitude
 
 __all__ = [
@@ -180,9 +180,15 @@ STUDIES: dict[str, Study] = {
 #: Where the cells can run: a local process pool, or Ray tasks (a local Ray or a cluster).
 BACKENDS = ("local", "ray")
 
-#: The CSV's result columns: the metrics of ``soft-snake evaluate``'s table but the return, then the
-#: episode's duration, its failure (empty if none) and the cell's wall time.
-RESULT_COLUMNS = (*(name for name in TABLE if name != "return"), "duration", "failure", "wall_time")
+#: The CSV's result columns: the metrics of ``soft-snake evaluate``'s table but the return and the
+#: navigation tasks' (no study runs them), then the episode's duration, its failure (empty if
+#: none) and the cell's wall time.
+RESULT_COLUMNS = (
+    *(name for name in TABLE if name != "return" and name not in NAV_METRICS),
+    "duration",
+    "failure",
+    "wall_time",
+)
 
 
 def cell_key(cell: dict[str, Any]) -> str:

@@ -35,7 +35,12 @@ __all__ = [
 
 ALGOS = ("PPO", "SAC")
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
-DEFAULT_BASELINES = {"SoftEel-v0": "pid", "SoftWorm-v0": "inching-pid"}
+DEFAULT_BASELINES = {
+    "SoftEel-v0": "pid",
+    "SoftWorm-v0": "inching-pid",
+    "SoftEelGoal-v0": "los",
+    "SoftEelPath-v0": "los",
+}
 CONFIGS = CONFIG_DIR / "algorithm"
 
 #: The metrics (registry names) of each evaluation in a run's learning_curve.csv.
@@ -65,6 +70,9 @@ class TrainConfig:
         checkpoint_freq: save a checkpoint every this many environment steps.
         baseline: the baseline policy spec evaluated once per run on the same seeds
             (``none`` to skip).
+        init_from: start a new run from another agent's weights instead of at random: a model
+            zip, a run folder, or ``zoo:<env id>`` (the PPO agent shipped for that id); see
+            :func:`soft_snake_gym.training.train.init_from`. ``""``: at random.
     """
 
     env_id: str
@@ -83,6 +91,7 @@ class TrainConfig:
     eval_seed: int = 1000
     checkpoint_freq: int = 50_000
     baseline: str = "default"
+    init_from: str = ""
 
     def __post_init__(self) -> None:
         """Check the values, raising ``ConfigError``."""
