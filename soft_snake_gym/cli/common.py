@@ -11,9 +11,18 @@ from typing import Any
 import gymnasium
 
 from soft_snake_gym.config import ConfigError, parse_assignments
+from soft_snake_gym.distributed import RAY_INSTALL, RayNotInstalled, import_ray
 from soft_snake_gym.policies import PolicyEnvMismatch
 
-__all__ = ["CLIError", "Parser", "USER_ERRORS", "add_env_arguments", "env_kwargs_from_args"]
+__all__ = [
+    "CLIError",
+    "Parser",
+    "USER_ERRORS",
+    "add_backend_arguments",
+    "add_env_arguments",
+    "check_backend_arguments",
+    "env_kwargs_from_args",
+]
 
 
 class CLIError(Exception):
@@ -28,6 +37,7 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
     gymnasium.error.Error,
     FileNotFoundError,
     ValueError,
+    RayNotInstalled,
 )
 
 
@@ -72,3 +82,27 @@ def env_kwargs_from_args(args: argparse.Namespace) -> dict[str, Any]:
             raise CLIError(f"--max-steps {args.max_steps} must be at least 1")
         env_kwargs["max_episode_steps"] = args.max_steps
     return env_kwargs
+
+
+def add_backend_arguments(p: argparse.ArgumentParser, what: str) -> None:
+    """``--backend {local,ray}`` and ``--address``: where a command's parallel ``what`` run."""
+    p.add_argument(
+        "--backend",
+        choices=("local", "ray"),
+        default="local",
+        help=f"run the {what} here (local, the default) or as Ray tasks (ray; needs {RAY_INSTALL})",
+    )
+    p.add_argument(
+        "--address",
+        metavar="ADDR",
+        help="with --backend ray: the Ray cluster to join (host:port from `ray start --head`, or auto); "
+        "default: a local Ray",
+    )
+
+
+def check_backend_arguments(args: argparse.Namespace) -> None:
+    """Refuse ``--address`` without ``--backend ray``; check Ray is installed when asked for."""
+    if args.address is not None and args.backend != "ray":
+        raise CLIError(f"--address {args.address} needs --backend ray")
+    if args.backend == "ray":
+        import_ray()

@@ -8,7 +8,7 @@ import sys
 from collections.abc import Iterable
 from pathlib import Path
 
-from soft_snake_gym.cli.common import CLIError
+from soft_snake_gym.cli.common import CLIError, add_backend_arguments, check_backend_arguments
 from soft_snake_gym.studies.sweep import STUDIES, StudyGrid, default_grid, read_results, run_sweep
 
 NAME = "sweep"
@@ -99,7 +99,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The command's arguments."""
     p.add_argument("study", choices=[*STUDIES, "all"], help="which study (or all)")
     p.add_argument("--out", default="sweeps", help="output folder for CSV and PNG (default sweeps/)")
-    p.add_argument("--workers", type=int, help="processes (default: all local cores)")
+    p.add_argument(
+        "--workers", type=int, help="processes, or the CPUs of a local Ray (default: all local cores)"
+    )
+    add_backend_arguments(p, "grid cells")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_grid_arguments(p)
 
@@ -109,13 +112,22 @@ def run(args: argparse.Namespace) -> int:
     grid = grid_from_args(args)
     if args.workers is not None and args.workers < 1:
         raise CLIError(f"--workers {args.workers} must be at least 1")
+    check_backend_arguments(args)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise CLIError(f"--out {args.out!r} is a file; give a folder for the CSV and heatmaps")
     names: Iterable[str] = STUDIES if args.study == "all" else [args.study]
     errors = 0
     for name in names:
-        res = run_sweep(name, args.out, grid, workers=args.workers, progress=not args.no_progress)
+        res = run_sweep(
+            name,
+            args.out,
+            grid,
+            workers=args.workers,
+            progress=not args.no_progress,
+            backend=args.backend,
+            address=args.address,
+        )
         print(
             f"{name}: {res['computed']} cells computed, {res['skipped']} resumed from {res['csv']} "
             f"in {res['seconds']:.1f} s; figures: {', '.join(str(p) for p in res['figures'])}"

@@ -23,12 +23,14 @@ drawn next to the CSV.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 import multiprocessing as mp
 import os
 import time
 import warnings
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,11 +41,13 @@ import numpy as np
 
 from soft_snake_gym import plots
 from soft_snake_gym.agents import make_policy
+from soft_snake_gym.distributed import connected, imap_unordered
 from soft_snake_gym.envs import register_envs
 from soft_snake_gym.evaluation import TABLE, evaluate, make_eval_env, metric_columns
 from soft_snake_gym.gaits import max_serpenoid_amplitude
 
 __all__ = [
+    "BACKENDS",
     "STUDIES",
     "Study",
     "StudyGrid",
@@ -171,6 +175,9 @@ STUDIES: dict[str, Study] = {
     ),
 }
 
+#: Where the cells can run: a local process pool, or Ray tasks (a local Ray or a cluster).
+BACKENDS = ("local", "ray")
+
 #: The CSV's result columns: the metrics of ``soft-snake evaluate``'s table but the return, then the
 #: episode's duration, its failure (empty if none) and the cell's wall time.
 RESULT_COLUMNS = (*(name for name in TABLE if name != "return"), "duration", "failure", "wall_time")
@@ -282,6 +289,36 @@ def _worker(args: tuple[dict[str, Any], StudyGrid]) -> dict[str, Any]:
         return row
 
 
+def _run_cells(
+    pending: list[dict[str, Any]],
+    grid: StudyGrid,
+    workers: int | None,
+    backend: str,
+    address: str | None,
+) -> Iterator[dict[str, Any]]:
+    """The rows of the ``pending`` cells, in the order they finish, on the chosen backend."""
+    if not pending:
+        return
+    if backend == "ray":  # connected by run_sweep; a cell whose worker dies runs again, yielded once
+        for _i, row in imap_unordered(_worker, [((cell, grid),) for cell in pending], max_retries=3):
+            yield row
+    elif workers == 1 or len(pending) == 1:
+        for cell in pending:
+            yield _worker((cell, grid))
+    else:
+        with ProcessPoolExecutor(
+            max_workers=min(workers, len(pending)), mp_context=mp.get_context("spawn")
+        ) as pool:
+            futures = [pool.submit(_worker, (cell, grid)) for cell in pending]
+            try:
+                for fut in as_completed(futures):
+                    yield fut.result()
+            except BaseException:  # Ctrl-C, or the consumer stopped: drop what has not started
+                for fut in futures:
+                    fut.cancel()
+                raise
+
+
 def run_sweep(
     study_name: str,
     out_dir: str | Path,
@@ -289,19 +326,30 @@ def run_sweep(
     workers: int | None = None,
     progress: bool = True,
     figures: bool = True,
+    backend: str = "local",
+    address: str | None = None,
 ) -> dict[str, Any]:
     """Run (or resume) one study; returns ``{"csv", "computed", "skipped", "seconds", "figures"}``.
+
+    The backend only decides where the cells run: the CSV, its rows and the resume are the same.
 
     Args:
         study_name: a key of :data:`STUDIES`.
         out_dir: folder of ``<study>.csv`` and its heatmaps.
         grid: bounds and resolution (defaults: :class:`StudyGrid`).
-        workers: processes (default: the number of local cores); 1 runs in this process.
+        workers: processes (default: the number of local cores); 1 runs in this process. With
+            ``backend="ray"`` and no address: the CPUs of the local Ray.
         progress: show a tqdm bar.
         figures: draw the heatmaps afterwards.
+        backend: ``"local"`` (a process pool) or ``"ray"`` (one Ray task per cell, one CPU
+            each; :mod:`soft_snake_gym.distributed`).
+        address: with ``backend="ray"``: the cluster to join (``host:port`` or ``"auto"``);
+            None starts a local Ray.
 
     Raises:
-        ValueError: an unknown study or fewer than one worker.
+        ValueError: an unknown study or backend, fewer than one worker, an address without the
+            Ray backend, an unreachable address.
+        RayNotInstalled: ``backend="ray"`` without Ray.
     """
     from tqdm.auto import tqdm  # here, not above: a fifth of a second to import
 
@@ -309,6 +357,10 @@ def run_sweep(
         raise ValueError(f"unknown study {study_name!r}; choose one of {', '.join(STUDIES)} or 'all'")
     if workers is not None and workers < 1:
         raise ValueError(f"workers = {workers} must be at least 1 (or None: every local core)")
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+    if address is not None and backend != "ray":
+        raise ValueError(f"an address ({address!r}) needs the Ray backend: add --backend ray")
     study = STUDIES[study_name]
     grid = grid or StudyGrid()
     out_dir = Path(out_dir)
@@ -318,10 +370,13 @@ def run_sweep(
     cells = study.cells(grid)
     pending = [c for c in cells if cell_key(c) not in done]
     columns = _columns(study)
-    workers = max(1, workers or os.cpu_count() or 1)
+    workers = max(1, workers or os.cpu_count() or 1) if workers or backend == "local" else None
     t0 = time.perf_counter()
     new_file = not path.is_file() or path.stat().st_size == 0
-    with path.open("a", newline="") as f:
+    with contextlib.ExitStack() as stack:
+        if backend == "ray" and pending:  # before the CSV is touched: Ray missing, a bad address
+            stack.enter_context(connected(address, num_cpus=workers if address is None else None))
+        f = stack.enter_context(path.open("a", newline=""))
         writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
         if new_file:
             writer.writeheader()
@@ -340,23 +395,9 @@ def run_sweep(
             unit="cell",
             disable=not progress,
         )
-        if workers == 1 or len(pending) <= 1:
-            for cell in pending:
-                write(_worker((cell, grid)))
-                bar.update()
-        elif pending:
-            with ProcessPoolExecutor(
-                max_workers=min(workers, len(pending)), mp_context=mp.get_context("spawn")
-            ) as pool:
-                futures = [pool.submit(_worker, (cell, grid)) for cell in pending]
-                try:
-                    for fut in as_completed(futures):
-                        write(fut.result())
-                        bar.update()
-                except KeyboardInterrupt:
-                    for fut in futures:
-                        fut.cancel()
-                    raise
+        for row in _run_cells(pending, grid, workers, backend, address):
+            write(row)
+            bar.update()
         bar.close()
     pngs: list[Path] = []
     if figures:
