@@ -7,6 +7,7 @@ import time
 
 from soft_snake_gym.cli.common import CLIError
 from soft_snake_gym.config import parse_assignments
+from soft_snake_gym.distributed import connected
 from soft_snake_gym.training.tune import METRIC_MODES, SEARCH_SPACE, TuneSettings, tune_ppo
 
 NAME = "tune"
@@ -50,7 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="fixed run settings or hyperparameters for every trial, e.g. n_envs=4 n_epochs=5",
     )
     p.add_argument("--address", help="Ray cluster address (host:port or auto; default: a local Ray)")
-    p.add_argument("--cpus-per-trial", type=float, default=1.0, help="Ray CPUs per trial (default 1)")
+    p.add_argument(
+        "--cpus-per-trial", type=int, default=1, help="Ray CPUs per trial, its threads' cap (default 1)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the TPE sampler (default 0)")
     p.add_argument(
         "--out",
@@ -62,8 +65,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Check everything, connect to Ray, tune, and print the best trial and the YAML written."""
-    from soft_snake_gym.distributed import connect  # here, not above: only this path needs Ray
-
     overrides = parse_assignments(
         args.hyperparams, "--hyperparams {item} is not key=value; write e.g. --hyperparams n_envs=4"
     )
@@ -83,9 +84,9 @@ def run(args: argparse.Namespace) -> int:
         **({"keys": keys} if keys else {}),
     )
     out = args.out or f"tune/{settings.env_id}"
-    connect(args.address)
     t0 = time.time()
-    result = tune_ppo(settings, out, verbose=0 if args.quiet else 1)
+    with connected(args.address, task_cpus=settings.cpus_per_trial):
+        result = tune_ppo(settings, out, verbose=0 if args.quiet else 1)
     wall = time.time() - t0
     print(
         f"{'resumed; ' if result.resumed else ''}{len(result.trials)} trials scored"

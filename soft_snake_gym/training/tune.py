@@ -119,7 +119,7 @@ class TuneSettings:
         overrides: run settings or hyperparameters laid over the config for every trial (and
             written into the best YAML).
         seed: seeds the TPE sampler (trials train with the config's seed).
-        cpus_per_trial: Ray CPUs each trial holds.
+        cpus_per_trial: Ray CPUs each trial holds (the workers' thread cap, given to ``connect``).
     """
 
     env_id: str
@@ -131,7 +131,7 @@ class TuneSettings:
     config: str | None = None
     overrides: dict[str, Any] = field(default_factory=dict)
     seed: int = 0
-    cpus_per_trial: float = 1.0
+    cpus_per_trial: int = 1
 
     def __post_init__(self) -> None:
         """Check every value, raising ``ConfigError`` (before any Ray work)."""
@@ -140,7 +140,7 @@ class TuneSettings:
         if unknown or not self.keys:
             what = f"unknown search-space key {unknown[0]!r}" if unknown else "an empty search space"
             raise ConfigError(f"{what}; valid keys: {', '.join(SEARCH_SPACE)}")
-        for name, lo in (("trials", 1), ("trial_steps", 1), ("evals", 1), ("seed", 0)):
+        for name, lo in (("trials", 1), ("trial_steps", 1), ("evals", 1), ("seed", 0), ("cpus_per_trial", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < lo:
                 raise ConfigError(f"{name} = {value!r} must be an integer >= {lo}")
@@ -153,8 +153,6 @@ class TuneSettings:
                 "energy_cost_weight changes the reward, so the trials' returns are not comparable; "
                 "score them with metric average_speed or cost_of_transport"
             )
-        if not math.isfinite(self.cpus_per_trial) or self.cpus_per_trial <= 0:
-            raise ConfigError(f"cpus_per_trial = {self.cpus_per_trial!r} must be > 0")
         self.trial_config({k: _first(SEARCH_SPACE[k]) for k in self.keys})  # the config loads
 
     @property

@@ -1,0 +1,128 @@
+"""``soft-snake tune``: real Ray Tune (Optuna TPE + ASHA) on a loopback Ray cluster, then train with its YAML.
+
+The trials are scaled down (384 environment steps, 100-step episodes) but go through the whole
+path: the CLI connects with ``--address``, each trial trains in a Ray worker and reports its
+evaluations, the best trial's values become a zoo-style YAML that ``soft-snake train`` takes.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import pytest
+
+from soft_snake_gym.cli import main
+from soft_snake_gym.config import ConfigError, load_yaml
+from soft_snake_gym.training.tune import SEARCH_SPACE, TuneSettings
+
+TINY = [
+    "--trial-steps",
+    "384",
+    "--evals",
+    "3",
+    "--search-space",
+    "learning_rate,gamma",
+    "--hyperparams",
+    "n_envs=2",
+    "n_steps=64",
+    "batch_size=64",
+    "n_epochs=2",
+    "eval_episodes=1",
+    "env_kwargs.max_episode_steps=100",
+]
+
+
+def test_an_unknown_search_space_key_is_one_line_listing_the_valid_keys(capsys, tmp_path):
+    code = main(["tune", "--search-space", "learning_rate,lr", "--out", str(tmp_path / "t")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "unknown search-space key 'lr'" in err and ", ".join(SEARCH_SPACE) in err
+    assert not (tmp_path / "t").exists()  # refused before Ray or any folder
+
+
+def test_bad_settings_are_refused_before_ray_starts():
+    with pytest.raises(ConfigError, match="trials = 0 must be an integer >= 1"):
+        TuneSettings("SoftEel-v0", trials=0)
+    with pytest.raises(ConfigError, match="energy_cost_weight changes the reward"):
+        TuneSettings("SoftEel-v0", keys=("learning_rate", "energy_cost_weight"))
+    with pytest.raises(ConfigError, match="does not exist"):
+        TuneSettings("SoftEal-v0")
+    with pytest.raises(ConfigError, match="unknown hyperparameter 'gama'"):
+        TuneSettings("SoftEel-v0", overrides={"gama": 0.9})
+
+
+@pytest.fixture(scope="module")
+def loopback_cluster():
+    cluster_utils = pytest.importorskip("ray.cluster_utils")
+    pytest.importorskip("optuna")
+    cluster = cluster_utils.Cluster(
+        initialize_head=True, head_node_args={"num_cpus": 1, "node_ip_address": "127.0.0.1"}
+    )
+    cluster.add_node(num_cpus=1, node_ip_address="127.0.0.1")
+    yield cluster.address
+    cluster.shutdown()
+
+
+def _last_rows(out: Path) -> list[dict[str, str]]:
+    rows = []
+    for curve in sorted(out.glob("*/run/learning_curve.csv")):
+        with open(curve) as fh:
+            rows.append(list(csv.DictReader(fh))[-1])
+    return rows
+
+
+@pytest.mark.slow
+@pytest.mark.ray
+def test_three_trials_write_a_yaml_that_train_takes_and_a_rerun_resumes(loopback_cluster, tmp_path, capsys):
+    out = tmp_path / "tune"
+    args = ["tune", "SoftEel-v0", "--trials", "3", *TINY, "--address", loopback_cluster, "--out", str(out)]
+    assert main([*args, "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "3 trials scored" in printed
+
+    # three trials, each its own run folder, scored on the same evaluation seed, with its own draw
+    finals = _last_rows(out)
+    assert len(finals) == 3
+    configs = [load_yaml(p)["SoftEel-v0"] for p in sorted(out.glob("*/run/config.yaml"))]
+    assert len({c["learning_rate"] for c in configs}) == 3
+    assert all(c["eval_seed"] == 1000 and c["eval_episodes"] == 1 for c in configs)
+
+    # the YAML holds the best trial's values over the user's fixed settings, at the config's budget
+    best = load_yaml(out / "best.yml")
+    section = best["SoftEel-v0"]
+    finished = [
+        (float(r["return_mean"]), c)
+        for r, c in zip(finals, configs, strict=True)
+        if int(r["timesteps"]) >= 384
+    ]
+    score, winner = max(finished, key=lambda t: t[0])
+    assert math.isfinite(score)
+    assert section["learning_rate"] == winner["learning_rate"] and section["gamma"] == winner["gamma"]
+    assert 1e-5 <= section["learning_rate"] <= 1e-3 and section["gamma"] in SEARCH_SPACE["gamma"].values
+    assert section["n_envs"] == 2 and section["n_steps"] == 64
+    assert section["env_kwargs"] == {"max_episode_steps": 100}
+    assert (
+        section["n_timesteps"] == 1_000_000 and section["baseline"] == "default"
+    )  # ppo.yml's, not a trial's
+
+    # soft-snake train takes it as is
+    run = tmp_path / "run"
+    code = main(
+        ["train", "SoftEel-v0", "--hyperparams-file", str(out / "best.yml"), "--n-timesteps", "128"]
+        + ["--run-dir", str(run), "--no-progress", "--hyperparams", "eval_freq=0", "checkpoint_freq=0"]
+    )
+    assert code == 0
+    trained = load_yaml(run / "config.yaml")["SoftEel-v0"]
+    assert trained["learning_rate"] == section["learning_rate"] and trained["gamma"] == section["gamma"]
+    assert (run / "final_model.zip").is_file()
+
+    # the same command again restores the experiment: no trial is trained again
+    capsys.readouterr()
+    assert main([*args, "--quiet"]) == 0
+    assert "resumed; 3 trials scored" in capsys.readouterr().out
+    assert _last_rows(out) == finals
+    # other settings on the same folder are refused, naming what differs
+    assert main([*[a if a != "3" else "4" for a in args[:4]], *args[4:], "--quiet"]) == 2
+    assert "trials 3 -> 4" in capsys.readouterr().err
