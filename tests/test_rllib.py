@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from soft_snake_gym.config import ConfigError
+from soft_snake_gym.distributed import worker_runtime_env
 from soft_snake_gym.rllib import make_env, ppo_config, register
 
 
@@ -66,19 +67,29 @@ def _rllib_missing() -> str | None:
     return None
 
 
+RLLIB_MISSING = _rllib_missing()
+
+
 @pytest.fixture()
 def loopback_ray():
+    """A local Ray on 127.0.0.1 whose workers are set up as the package's (``worker_runtime_env``)."""
     ray = pytest.importorskip("ray")
-    ray.init(num_cpus=2, include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
+    ray.init(
+        num_cpus=2,
+        include_dashboard=False,
+        _node_ip_address="127.0.0.1",
+        log_to_driver=False,
+        runtime_env=worker_runtime_env(),
+    )
     yield ray
     ray.shutdown()
 
 
 @pytest.mark.slow
+@pytest.mark.ray
+@pytest.mark.skipif(RLLIB_MISSING is not None, reason=f"not RLlib's extra ({RLLIB_MISSING}): README, RLlib")
 def test_one_ppo_iteration_on_softeel_samples_the_batch_on_a_remote_runner_and_learns(loopback_ray):
     pytest.importorskip("ray.rllib")
-    if (why := _rllib_missing()) is not None:
-        pytest.skip(f"RLlib's extra is not installed ({why}): see the README, RLlib")
     import torch
 
     batch, episode = 200, 100

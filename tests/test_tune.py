@@ -9,6 +9,10 @@ from __future__ import annotations
 
 import csv
 import math
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -65,33 +69,60 @@ def loopback_cluster():
     cluster.shutdown()
 
 
-def _last_rows(out: Path) -> list[dict[str, str]]:
-    rows = []
-    for curve in sorted(out.glob("*/run/learning_curve.csv")):
-        with open(curve) as fh:
-            rows.append(list(csv.DictReader(fh))[-1])
-    return rows
+def _curves(out: Path) -> dict[str, list[dict[str, str]]]:
+    """Every trial's learning-curve rows, by trial folder."""
+    curves = {}
+    for path in sorted(out.glob("*/run/learning_curve.csv")):
+        with open(path) as fh:
+            curves[path.parent.parent.name] = list(csv.DictReader(fh))
+    return curves
 
 
 @pytest.mark.slow
 @pytest.mark.ray
-def test_three_trials_write_a_yaml_that_train_takes_and_a_rerun_resumes(loopback_cluster, tmp_path, capsys):
+def test_three_trials_resume_after_ctrl_c_and_write_a_yaml_that_train_takes(
+    loopback_cluster, tmp_path, capsys
+):
     out = tmp_path / "tune"
     args = ["tune", "SoftEel-v0", "--trials", "3", *TINY, "--address", loopback_cluster, "--out", str(out)]
+
+    # Ctrl-C once a trial has evaluated mid-run (and checkpointed): Tune saves its state, exit 130
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "soft_snake_gym.cli", *args, "--quiet"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.time() + 300
+    while proc.poll() is None and time.time() < deadline:
+        if any(len(rows) >= 2 for rows in _curves(out).values()):
+            proc.send_signal(signal.SIGINT)
+            break
+        time.sleep(0.2)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-2000:]
+    assert "run the same command again to resume" in err
+    assert not (out / "best.yml").exists()
+
+    # the same command resumes: three trials in all, none trained again from its start
     assert main([*args, "--quiet"]) == 0
     printed = capsys.readouterr().out
-    assert "3 trials scored" in printed
+    assert "resumed; 3 trials scored" in printed
+    curves = _curves(out)
+    assert len(curves) == 3
+    for rows in curves.values():
+        steps = [int(r["timesteps"]) for r in rows]
+        assert steps == sorted(set(steps)), steps  # a trial restarted from 0 would append 4 again
+    finals = [rows[-1] for rows in curves.values()]
 
-    # three trials, each its own run folder, scored on the same evaluation seed, with its own draw
-    finals = _last_rows(out)
-    assert len(finals) == 3
-    configs = [load_yaml(p)["SoftEel-v0"] for p in sorted(out.glob("*/run/config.yaml"))]
+    # three draws, scored on the same evaluation seed
+    configs = [load_yaml(out / name / "run" / "config.yaml")["SoftEel-v0"] for name in curves]
     assert len({c["learning_rate"] for c in configs}) == 3
     assert all(c["eval_seed"] == 1000 and c["eval_episodes"] == 1 for c in configs)
 
-    # the YAML holds the best trial's values over the user's fixed settings, at the config's budget
-    best = load_yaml(out / "best.yml")
-    section = best["SoftEel-v0"]
+    # the YAML holds the best finished trial's values over the user's fixed settings, at the
+    # config's budget
+    section = load_yaml(out / "best.yml")["SoftEel-v0"]
     finished = [
         (float(r["return_mean"]), c)
         for r, c in zip(finals, configs, strict=True)
@@ -118,11 +149,7 @@ def test_three_trials_write_a_yaml_that_train_takes_and_a_rerun_resumes(loopback
     assert trained["learning_rate"] == section["learning_rate"] and trained["gamma"] == section["gamma"]
     assert (run / "final_model.zip").is_file()
 
-    # the same command again restores the experiment: no trial is trained again
-    capsys.readouterr()
-    assert main([*args, "--quiet"]) == 0
-    assert "resumed; 3 trials scored" in capsys.readouterr().out
-    assert _last_rows(out) == finals
     # other settings on the same folder are refused, naming what differs
+    capsys.readouterr()
     assert main([*[a if a != "3" else "4" for a in args[:4]], *args[4:], "--quiet"]) == 2
     assert "trials 3 -> 4" in capsys.readouterr().err

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 from soft_snake_gym.cli.common import CLIError
 from soft_snake_gym.config import parse_assignments
 from soft_snake_gym.distributed import connected
-from soft_snake_gym.training.tune import METRIC_MODES, SEARCH_SPACE, TuneSettings, tune_ppo
+from soft_snake_gym.training.tune import METRIC_MODES, SEARCH_SPACE, TuneInterrupted, TuneSettings, tune_ppo
 
 NAME = "tune"
 HELP = "tune PPO's hyperparameters on Ray Tune (Optuna TPE + ASHA); writes a YAML for train"
@@ -85,8 +86,12 @@ def run(args: argparse.Namespace) -> int:
     )
     out = args.out or f"tune/{settings.env_id}"
     t0 = time.time()
-    with connected(args.address, task_cpus=settings.cpus_per_trial):
-        result = tune_ppo(settings, out, verbose=0 if args.quiet else 1)
+    try:
+        with connected(args.address, task_cpus=settings.cpus_per_trial):
+            result = tune_ppo(settings, out, verbose=0 if args.quiet else 1)
+    except TuneInterrupted as err:
+        print(f"interrupted ({err}); run the same command again to resume {out}", file=sys.stderr)
+        return 130
     wall = time.time() - t0
     print(
         f"{'resumed; ' if result.resumed else ''}{len(result.trials)} trials scored"

@@ -40,7 +40,17 @@ from soft_snake_gym.training.config import CURVE_METRICS, TrainConfig, check_env
 from soft_snake_gym.training.run import latest_checkpoint
 from soft_snake_gym.training.train import train
 
-__all__ = ["METRIC_MODES", "SEARCH_SPACE", "DEFAULT_KEYS", "Param", "TuneResult", "TuneSettings", "tune_ppo"]
+__all__ = [
+    "DEFAULT_KEYS",
+    "METRIC_MODES",
+    "SEARCH_SPACE",
+    "Param",
+    "TuneInterrupted",
+    "TuneResult",
+    "TuneSettings",
+    "ppo_trial",
+    "tune_ppo",
+]
 
 
 @dataclass(frozen=True)
@@ -197,8 +207,11 @@ def _first(param: Param) -> float:
     return param.values[0]
 
 
-def _run_trial(params: dict[str, Any], settings: TuneSettings) -> None:
-    """One trial, in a Ray worker: train in the trial's folder and report every evaluation."""
+def ppo_trial(params: dict[str, Any], settings: TuneSettings) -> None:
+    """One trial, in a Ray worker: train in the trial's folder and report every evaluation.
+
+    A trial of a restored experiment continues its run folder from the last checkpoint.
+    """
     from ray import tune  # here, not above: Ray is optional and takes seconds to import
 
     cfg = settings.trial_config(params)
@@ -209,6 +222,15 @@ def _run_trial(params: dict[str, Any], settings: TuneSettings) -> None:
         tune.report({k: float(v) for k, v in row.items()})
 
     train(cfg, run_dir, resume=resume, progress=False, on_eval=report)
+
+
+class TuneInterrupted(KeyboardInterrupt):
+    """The tuning run stopped before every trial ended (Ctrl-C, SIGTERM); Tune saved its state."""
+
+
+def _trial_dirname(trial) -> str:
+    """A trial's folder: ``ppo_trial_<id>`` (Tune's default spells out every sampled value)."""
+    return f"{trial.trainable_name}_{trial.trial_id}"
 
 
 @dataclass(frozen=True)
@@ -254,6 +276,7 @@ def tune_ppo(settings: TuneSettings, out_dir: str | Path, verbose: int = 1) -> T
 
     Raises:
         ConfigError: ``out_dir`` holds a tuning run with other settings, or no trial reported.
+        TuneInterrupted: interrupted before every trial ended; the same call resumes it.
     """
     from ray import tune  # here, not above: Ray is optional and takes seconds to import
     from ray.tune.schedulers import ASHAScheduler
@@ -275,7 +298,7 @@ def tune_ppo(settings: TuneSettings, out_dir: str | Path, verbose: int = 1) -> T
     metric = f"{settings.metric}_mean"
     mode = METRIC_MODES[settings.metric]
     trainable = tune.with_resources(
-        tune.with_parameters(_run_trial, settings=settings), {"cpu": settings.cpus_per_trial}
+        tune.with_parameters(ppo_trial, settings=settings), {"cpu": settings.cpus_per_trial}
     )
     if resumed:
         tuner = tune.Tuner.restore(str(out_dir), trainable, resume_errored=True)
@@ -296,10 +319,14 @@ def tune_ppo(settings: TuneSettings, out_dir: str | Path, verbose: int = 1) -> T
                     grace_period=settings.eval_freq,
                     reduction_factor=2,
                 ),
+                trial_dirname_creator=_trial_dirname,
             ),
             run_config=tune.RunConfig(name=out_dir.name, storage_path=str(out_dir.parent), verbose=verbose),
         )
-    grid = tuner.fit()
+    grid = tuner.fit()  # Ctrl-C or SIGTERM: Tune stops the trials, saves its state and returns
+    ended = grid.num_terminated + grid.num_errors
+    if ended < settings.trials:
+        raise TuneInterrupted(f"{ended} of {settings.trials} trials ended")
     trials = [
         ({k: r.config[k] for k in settings.keys}, float(r.metrics[metric]), int(r.metrics["timesteps"]))
         for r in grid
