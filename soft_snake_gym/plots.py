@@ -256,15 +256,18 @@ def learning_curve(
 
 
 def comparison_chart(
-    results: dict[str, dict[str, tuple[float, float]]],
+    results: dict[str, dict[str, tuple[float, ...]]],
     metrics: Sequence[tuple[str, str, str]],
     path: str | Path,
     title: str = "",
 ) -> Path:
-    """Bar chart (mean with std error bars), one panel per metric, one bar per policy.
+    """Bar chart, one panel per metric, one bar per policy, with its error bar.
+
+    A bar is a mean with a symmetric std error bar, or an estimate with its interval (an
+    asymmetric error bar from ``lower`` to ``upper``, hatched).
 
     Args:
-        results: policy spec -> metric key -> (mean, std).
+        results: policy spec -> metric key -> (mean, std) or (estimate, lower, upper).
         metrics: the panels' (key, label, unit).
         path: the PNG.
         title: the figure's title.
@@ -273,9 +276,20 @@ def comparison_chart(
     fig = _figure(figsize=(4.2 * len(metrics), 3.6))
     axes = fig.subplots(1, len(metrics), squeeze=False)[0]
     for ax, (key, label, unit) in zip(axes, metrics, strict=True):
-        means = [results[n].get(key, (math.nan, 0))[0] for n in names]
-        stds = [results[n].get(key, (0, math.nan))[1] for n in names]
-        ax.bar(range(len(names)), means, yerr=stds, capsize=4, color=[f"C{i}" for i in range(len(names))])
+        values = [results[n].get(key, (math.nan, math.nan)) for n in names]
+        means = [v[0] for v in values]
+        below = [v[0] - v[1] if len(v) == 3 else v[1] for v in values]
+        above = [v[2] - v[0] if len(v) == 3 else v[1] for v in values]
+        bars = ax.bar(
+            range(len(names)),
+            means,
+            yerr=[below, above],
+            capsize=4,
+            color=[f"C{i}" for i in range(len(names))],
+        )
+        for bar, v in zip(bars, values, strict=True):
+            if len(v) == 3:  # an interval, not a spread
+                bar.set_hatch("//")
         ax.set_xticks(range(len(names)), names, rotation=20, ha="right")
         ax.set_ylabel(f"{label} [{unit}]")
         ax.set_title(label)

@@ -28,7 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         nargs="+",
         metavar="SPEC",
         help="baselines (pid, open-loop, 'pid:alpha=0.6', inching-pid...), run folders, "
-        "model zips or zoo:ppo (default: the env's baselines and its shipped PPO agent)",
+        "model zips or zoo:ppo; a seed set (the parent folder of `train --seeds` runs, or a quoted "
+        "glob 'runs/x_s*') is reported as the IQM over runs with a 95%% bootstrap CI "
+        "(default: the env's baselines and its shipped PPO agent)",
     )
     p.add_argument("--episodes", type=int, default=10, help="episodes per policy (default 10)")
     p.add_argument("--seed", type=int, default=0, help="first seed; every policy gets the same (default 0)")
@@ -58,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
         raise CLIError(
             f"give --policies for {args.env_id} (defaults exist for {', '.join(DEFAULT_POLICIES)})"
         )
-    results = compare(args.env_id, specs, args.episodes, args.seed)
+    scores: dict = {}
+    results = compare(args.env_id, specs, args.episodes, args.seed, scores=scores)
     title = f"{args.env_id}: {episodes_on_seeds(args.episodes, args.seed)}"
     print(format_comparison(results, title))
     out = plot_comparison(results, args.out or f"compare_{args.env_id}.png", title)
@@ -67,17 +70,16 @@ def run(args: argparse.Namespace) -> int:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)
         clean = {
-            s: {
-                k: [m if math.isfinite(m) else None, d if math.isfinite(d) else None]
-                for k, (m, d) in r.items()
-            }
+            s: {k: [x if math.isfinite(x) else None for x in v] for k, v in r.items()}
             for s, r in results.items()
         }
-        path.write_text(
-            json.dumps(
-                {"env_id": args.env_id, "episodes": args.episodes, "seed": args.seed, "results": clean},
-                indent=2,
-            )
-        )
+        runs = {
+            s: {run: {k: m if math.isfinite(m) else None for k, m in r.items()} for run, r in per_run.items()}
+            for s, per_run in scores.items()
+        }
+        doc = {"env_id": args.env_id, "episodes": args.episodes, "seed": args.seed, "results": clean}
+        if runs:  # seed sets: results are [IQM, lower, upper]; each run's mean is here
+            doc["seed_sets"] = runs
+        path.write_text(json.dumps(doc, indent=2))
         print(f"wrote {path}")
     return 0

@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from soft_snake_gym.cli.common import CLIError
+from soft_snake_gym.cli.common import CLIError, add_backend_arguments, check_backend_arguments
 from soft_snake_gym.config import load_yaml, parse_assignments
 from soft_snake_gym.training import (
     ALGOS,
@@ -21,6 +21,7 @@ from soft_snake_gym.training import (
     steps_per_iteration,
     train,
 )
+from soft_snake_gym.training.seeds import parse_seeds, train_seeds
 
 NAME = "train"
 HELP = "train an SB3 agent (PPO or SAC) with YAML hyperparameters; resumable"
@@ -46,9 +47,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--n-timesteps", type=int, help="total environment steps (overrides the config)")
     p.add_argument("--seed", type=int, help="seed (overrides the config)")
+    p.add_argument(
+        "--seeds",
+        metavar="RANGE",
+        help="train once per seed, e.g. 0-7 or 0,2,5: one run folder per seed, DIR/s<seed> under "
+        "--run-dir (default runs/<env>_<algo>)",
+    )
     p.add_argument("--run-dir", metavar="DIR", help="run folder (default runs/<env>_<algo>_s<seed>)")
     p.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its last checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_backend_arguments(p, "seeds of --seeds (local: one after another)")
+    p.add_argument("--workers", type=int, help="with --backend ray and no --address: CPUs of the local Ray")
 
 
 def _step_plan(cfg: TrainConfig, start: int) -> str:
@@ -80,6 +89,10 @@ def run(args: argparse.Namespace) -> int:
     for key in ("n_timesteps", "seed"):
         if getattr(args, key) is not None:
             overrides[key] = getattr(args, key)
+    if args.seeds is not None:
+        return _run_seeds(args, overrides)
+    if args.backend != "local" or args.address or args.workers is not None:
+        raise CLIError("--backend, --address and --workers spread the seeds of --seeds; add e.g. --seeds 0-3")
     if args.resume:
         run_dir = Path(args.resume)
         if args.run_dir or args.config:
@@ -127,4 +140,49 @@ def run(args: argparse.Namespace) -> int:
             )
         print(line)
     print(f"evaluate it with: soft-snake evaluate {cfg.env_id} --policy {run_dir}")
+    return 0
+
+
+def _run_seeds(args: argparse.Namespace, overrides: dict) -> int:
+    """``--seeds``: one run folder per seed, here or on Ray."""
+    seeds = parse_seeds(args.seeds)
+    if args.seed is not None or args.resume:
+        raise CLIError("--seeds trains new runs of its own seeds; drop --seed and --resume")
+    if args.workers is not None and args.workers < 1:
+        raise CLIError(f"--workers {args.workers} must be at least 1")
+    check_backend_arguments(args)
+    check_env_id(args.env_id)
+    cfg = load_train_config(args.env_id, args.algo, args.config, overrides)
+    parent = Path(args.run_dir or f"runs/{cfg.env_id}_{cfg.algo}")
+    where = "one after another" if args.backend == "local" else f"on Ray ({args.address or 'local'})"
+    print(
+        f"training {cfg.algo} on {cfg.env_id} {_step_plan(cfg, 0)} with {cfg.n_envs} envs, "
+        f"seeds {args.seeds} ({len(seeds)} runs, {where}) -> {parent}/s<seed>"
+    )
+    t0 = time.time()
+
+    def done(seed: int, final: Path) -> None:
+        print(f"seed {seed} done after {time.time() - t0:.0f} s: {final}")
+
+    try:
+        train_seeds(
+            cfg,
+            seeds,
+            parent,
+            backend=args.backend,
+            address=args.address,
+            workers=args.workers,
+            progress=not args.no_progress,
+            on_done=done,
+        )
+    except KeyboardInterrupt:
+        print(
+            "interrupted; each seed's folder keeps its checkpoints: continue one with "
+            f"soft-snake train --resume {parent}/s<seed>",
+            file=sys.stderr,
+        )
+        return 130
+    print(
+        f"done in {time.time() - t0:.0f} s; compare them with: soft-snake compare {cfg.env_id} --policies {parent}"
+    )
     return 0
