@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from test_ray import enter_loopback_namespace
 
 from soft_snake_gym.config import ConfigError
 from soft_snake_gym.distributed import worker_runtime_env
@@ -72,8 +73,9 @@ RLLIB_MISSING = _rllib_missing()
 
 @pytest.fixture()
 def loopback_ray():
-    """A local Ray on 127.0.0.1 whose workers are set up as the package's (``worker_runtime_env``)."""
+    """A local Ray on 127.0.0.1 (in this process's own network namespace), workers set up as the package's."""
     ray = pytest.importorskip("ray")
+    enter_loopback_namespace()
     ray.init(
         num_cpus=2,
         include_dashboard=False,
