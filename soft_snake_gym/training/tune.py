@@ -36,6 +36,7 @@ from typing import Any
 import yaml
 
 from soft_snake_gym.config import ConfigError
+from soft_snake_gym.distributed import RAY_INSTALL, RayNotInstalled
 from soft_snake_gym.training.config import CURVE_METRICS, TrainConfig, check_env_id, load_train_config
 from soft_snake_gym.training.run import latest_checkpoint
 from soft_snake_gym.training.train import train
@@ -163,7 +164,7 @@ class TuneSettings:
                 "energy_cost_weight changes the reward, so the trials' returns are not comparable; "
                 "score them with metric average_speed or cost_of_transport"
             )
-        self.trial_config({k: _first(SEARCH_SPACE[k]) for k in self.keys})  # the config loads
+        self.trial_config({k: SEARCH_SPACE[k].values[0] for k in self.keys})  # the config loads
 
     @property
     def eval_freq(self) -> int:
@@ -175,9 +176,15 @@ class TuneSettings:
         base = load_train_config(self.env_id, "PPO", self.config, self.overrides)
         over: dict[str, Any] = dict(self.overrides)
         for key, value in params.items():
-            if key == "net_width":
-                depth = len(base.policy_kwargs.get("net_arch") or [64, 64])
-                over["policy_kwargs"] = {**over.get("policy_kwargs", {}), "net_arch": [int(value)] * depth}
+            if key == "net_width":  # every layer this wide; the depth (of pi and vf) is the config's
+                arch = base.policy_kwargs.get("net_arch") or [64, 64]
+                width = int(value)
+                arch = (
+                    {k: [width] * len(v) for k, v in arch.items()}
+                    if isinstance(arch, dict)
+                    else [width] * len(arch)
+                )
+                over["policy_kwargs"] = {**over.get("policy_kwargs", {}), "net_arch": arch}
             elif key == "energy_cost_weight":
                 over["env_kwargs"] = {**over.get("env_kwargs", {}), key: float(value)}
             else:
@@ -201,10 +208,6 @@ class TuneSettings:
             "baseline": "none",
         }
         return load_train_config(self.env_id, "PPO", self.config, {**self.overrides_for(params), **run})
-
-
-def _first(param: Param) -> float:
-    return param.values[0]
 
 
 def ppo_trial(params: dict[str, Any], settings: TuneSettings) -> None:
@@ -276,12 +279,19 @@ def tune_ppo(settings: TuneSettings, out_dir: str | Path, verbose: int = 1) -> T
 
     Raises:
         ConfigError: ``out_dir`` holds a tuning run with other settings, or no trial reported.
+        RayNotInstalled: Optuna is missing (the ``ray`` extra installs it).
         TuneInterrupted: interrupted before every trial ended; the same call resumes it.
     """
     from ray import tune  # here, not above: Ray is optional and takes seconds to import
     from ray.tune.schedulers import ASHAScheduler
     from ray.tune.search.optuna import OptunaSearch
 
+    try:
+        import optuna  # noqa: F401 - OptunaSearch fails later, with an assertion, without it
+    except ImportError:
+        raise RayNotInstalled(
+            f"soft-snake tune needs Optuna, which is not installed; install: {RAY_INSTALL}"
+        ) from None
     out_dir = Path(out_dir).resolve()
     record = _settings_record(settings)
     saved = out_dir / "settings.json"
