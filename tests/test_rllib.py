@@ -77,6 +77,7 @@ def loopback_ray():
     ray = pytest.importorskip("ray")
     enter_loopback_namespace()
     ray.init(
+        address="local",  # a new Ray, even where `ray start` left a cluster's address behind
         num_cpus=2,
         include_dashboard=False,
         _node_ip_address="127.0.0.1",
