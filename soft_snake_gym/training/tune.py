@@ -333,8 +333,10 @@ def tune_ppo(settings: TuneSettings, out_dir: str | Path, verbose: int = 1) -> T
             ),
             run_config=tune.RunConfig(name=out_dir.name, storage_path=str(out_dir.parent), verbose=verbose),
         )
-    grid = tuner.fit()  # Ctrl-C or SIGTERM: Tune stops the trials, saves its state and returns
-    ended = grid.num_terminated + grid.num_errors
+    grid = tuner.fit()  # Ctrl-C: Tune stops the trials, saves its state and returns
+    # the saved state tells (the returned grid marks the trials stopped by Ctrl-C terminated)
+    state = tune.ExperimentAnalysis(str(out_dir)).trials
+    ended = sum(t.status in ("TERMINATED", "ERROR") for t in state)
     if ended < settings.trials:
         raise TuneInterrupted(f"{ended} of {settings.trials} trials ended")
     trials = [
