@@ -55,10 +55,10 @@ def main(argv: list[str] | None = None) -> None:
     print(f"PPO on {args.env} with {args.env_runners} env runner(s), {args.batch} steps per iteration")
     for _ in range(args.iterations):
         result = algo.train()
-        runners = result["env_runners"]
+        runners = result.get("env_runners", {})
         ret = float(runners.get("episode_return_mean", math.nan))
         print(
-            f"iteration {result['training_iteration']:3d}: {int(result['num_env_steps_sampled_lifetime']):8,} "
+            f"iteration {result['training_iteration']:3d}: {int(result.get('num_env_steps_sampled_lifetime', 0)):8,} "
             f"steps, {int(runners.get('num_episodes_lifetime', 0)):4d} episodes, "
             f"episode return mean {ret:8.3f}, {time.time() - t0:6.1f} s"
         )

@@ -112,7 +112,8 @@ def ppo_config(
     return (
         PPOConfig()
         .environment(env_id, env_config=dict(env_config or {}))
-        .env_runners(num_env_runners=num_env_runners)
+        # RLlib's 60 s default gives up on a runner still making its envs (numba's cache, imports)
+        .env_runners(num_env_runners=num_env_runners, sample_timeout_s=600.0)
         .training(
             train_batch_size_per_learner=train_batch_size,
             minibatch_size=minibatch_size,
