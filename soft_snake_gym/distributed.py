@@ -127,7 +127,8 @@ def connect(address: str | None = None, num_cpus: int | None = None, task_cpus: 
     Already connected: returns ``ray`` as it is (the existing job's settings stay).
 
     Args:
-        address: None starts a local Ray in this process; ``"host:port"`` joins the cluster
+        address: None starts a new local Ray for this process (even if a cluster runs on this
+            machine); ``"host:port"`` joins the cluster
             whose head node is there (``ray start --head`` prints it); ``"auto"`` joins the
             cluster started on this machine.
         num_cpus: CPUs of a local Ray (default: every core); ignored with an address.
@@ -145,7 +146,13 @@ def connect(address: str | None = None, num_cpus: int | None = None, task_cpus: 
     if address is None:
         if num_cpus is not None and (int(num_cpus) != num_cpus or num_cpus < 1):
             raise ValueError(f"num_cpus = {num_cpus!r} must be a whole number, at least 1 (or None)")
-        ray.init(num_cpus=num_cpus, runtime_env=runtime_env, log_to_driver=False, include_dashboard=False)
+        ray.init(  # "local": a new Ray even where `ray start` left a cluster to find
+            address="local",
+            num_cpus=num_cpus,
+            runtime_env=runtime_env,
+            log_to_driver=False,
+            include_dashboard=False,
+        )
         return ray
     if address != "auto":
         _check_reachable(address)

@@ -297,6 +297,9 @@ def comparison_chart(
     if title:
         fig.suptitle(title)
     fig.tight_layout()
+    if any(len(v) == 3 for r in results.values() for v in r.values()):
+        fig.subplots_adjust(bottom=0.3)
+        fig.text(0.01, 0.01, "hatched: IQM over seeds, 95 % bootstrap CI; plain: mean ± std", fontsize=8)
     return _save(fig, path, dpi=110)
 
 

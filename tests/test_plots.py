@@ -72,6 +72,22 @@ def test_comparison_chart_draws_each_policys_mean_with_its_std(tmp_path, monkeyp
     assert [t.get_text() for t in ax.get_xticklabels()] == ["pid", "open-loop"]
 
 
+def test_comparison_chart_draws_a_seed_sets_interval_not_a_spread(tmp_path, monkeypatch):
+    import numpy as np
+
+    from soft_snake_gym import plots
+
+    drawn = _capture(monkeypatch)
+    results = {"pid": {"average_speed": (0.1, 0.01)}, "runs/x": {"average_speed": (0.05, 0.02, 0.09)}}
+    plots.comparison_chart(results, [("average_speed", "average speed", "m/s")], tmp_path / "x.png")
+    ax = drawn[0].axes[0]
+    assert [p.get_height() for p in ax.patches] == [0.1, 0.05]
+    assert [p.get_hatch() for p in ax.patches] == [None, "//"]
+    (segments,) = [c.get_segments() for c in ax.collections]  # the error bars: (x, lo) to (x, hi)
+    spans = [sorted(np.asarray(seg)[:, 1]) for seg in segments]
+    assert np.allclose(spans, [[0.09, 0.11], [0.02, 0.09]])
+
+
 def test_learning_curve_is_drawn_from_the_run_folder(tmp_path, monkeypatch):
     import csv
 

@@ -141,6 +141,15 @@ def test_a_sweep_on_the_cluster_writes_the_local_rows_and_resumes(cluster, local
     assert "0 cells computed, 8 resumed" in res.stdout  # nothing left: Ray is not even started
 
 
+def test_a_local_ray_is_its_own_even_beside_a_running_cluster(cluster, local_sweep, tmp_path):
+    # without --address a new Ray starts for the command, not the cluster `ray start` left
+    one = ["swim-gait", "--n-alpha", "1", "--n-omega", "1", "--cycles", "1", "--no-progress"]
+    res = cli("sweep", *one, "--out", str(tmp_path), "--backend", "ray", "--workers", "1")
+    assert res.returncode == 0, ray_errors(res)
+    got = rows(tmp_path / "swim-gait.csv")
+    assert len(got) == 2 and got == {k: v for k, v in rows(local_sweep).items() if k in got}
+
+
 def descendants(pid: int) -> list[int]:
     """The processes started by ``pid``, at any depth (from /proc)."""
     parent = {}
@@ -292,7 +301,7 @@ def test_an_unreachable_address_is_one_line_fast_and_writes_nothing(cluster, tmp
 def test_bad_seed_ranges_are_one_line_errors(tmp_path):
     for seeds, expected in (
         ("5-2", "the range 5-2 ends below its start; write 2-5"),
-        ("a-b", "'a-b' is not a seed or a range"),
+        ("a-b", "'a-b' is not a seed or a range; write e.g. 0-7 or 0,2,5"),
         ("0-2,1", "names seed 1 twice"),
     ):
         res = cli(*TRAIN, "--seeds", seeds, "--run-dir", str(tmp_path / "r"))

@@ -94,6 +94,11 @@ def _rliable() -> tuple[ModuleType, ModuleType]:
             f"the interquartile mean over seeds needs rliable, which is not installed; install it with: "
             f"{RAY_INSTALL}"
         ) from None
+    except Exception as err:  # noqa: BLE001 - rliable 1.2 breaks at import with arch 7 on pandas 3
+        raise RayNotInstalled(
+            f"rliable fails to import ({type(err).__name__}: {err}); it needs arch < 8 and pandas < 3, "
+            f"which {RAY_INSTALL} installs"
+        ) from None
     return library, metrics
 
 
@@ -158,12 +163,12 @@ def compare(
         scores: if given, filled with seed set -> run folder -> metric -> the run's mean.
     """
     env = make_eval_env(env_id, n_envs=1, seed=seed, env_kwargs=env_kwargs)
+    sets = {spec: seed_runs(spec) for spec in specs}  # all errors before any work
+    if any(sets.values()):
+        _rliable()  # missing: say so before loading anything
     policies: dict[str, Any] = {}
-    for spec in specs:  # all errors before any work
-        runs = seed_runs(spec)
+    for spec, runs in sets.items():
         policies[spec] = {str(r): make_policy(str(r), env) for r in runs} if runs else make_policy(spec, env)
-    if any(isinstance(p, dict) for p in policies.values()):
-        _rliable()  # missing: say so before any episode runs
     results: dict[str, dict[str, tuple[float, ...]]] = {}
     for spec, policy in policies.items():
         if not isinstance(policy, dict):

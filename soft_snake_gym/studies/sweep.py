@@ -18,7 +18,9 @@ needed so that neither the open-loop rate nor the PID saturation ``1.5 alpha ome
 
 Every finished cell is appended to ``<out>/<study>.csv`` at once (flushed), so an interrupted
 sweep keeps it; a rerun reads the CSV and computes only the missing cells. Heatmaps (PNG) are
-drawn next to the CSV.
+drawn next to the CSV. The cells run in a local process pool, or as Ray tasks on a local Ray or
+a cluster (``backend="ray"``, docs/scaling.md); only this process writes the CSV, so the rows
+and the resume do not depend on the backend.
 """
 
 from __future__ import annotations

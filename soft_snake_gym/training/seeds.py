@@ -50,7 +50,7 @@ def parse_seeds(text: str) -> list[int]:
         seeds.extend(range(lo, hi + 1))
     repeated = sorted({s for s in seeds if seeds.count(s) > 1})
     if repeated:
-        raise ConfigError(f"--seeds {text!r} names seed {repeated[0]} twice")
+        raise ConfigError(f"--seeds {text!r}: names seed {repeated[0]} twice")
     return seeds
 
 
