@@ -47,6 +47,15 @@ def test_an_unknown_search_space_key_is_one_line_listing_the_valid_keys(capsys, 
     assert not (tmp_path / "t").exists()  # refused before Ray or any folder
 
 
+def test_an_unreachable_address_is_one_line(capsys, tmp_path):
+    pytest.importorskip("ray")
+    code = main(["tune", "--trials", "1", "--address", "127.0.0.1:9", "--out", str(tmp_path / "t")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "no Ray cluster answers there" in err
+    assert not (tmp_path / "t").exists()
+
+
 def test_bad_settings_are_refused_before_ray_starts():
     with pytest.raises(ConfigError, match="trials = 0 must be an integer >= 1"):
         TuneSettings("SoftEel-v0", trials=0)
