@@ -82,6 +82,8 @@ def ppo_config(
 ):
     """RLlib's PPO (current API stack) on one of the envs, with its creator registered.
 
+    Actions are clipped to the env's bounds before the env sees them, as SB3 does.
+
     Args:
         env_id: ``SoftEel-v0`` or ``SoftWorm-v0``.
         env_config: the env's keywords (``max_episode_steps`` included).
@@ -111,7 +113,9 @@ def ppo_config(
         raise ImportError(f"RLlib is not installed: {INSTALL}") from None
     return (
         PPOConfig()
-        .environment(env_id, env_config=dict(env_config or {}))
+        # actions clipped to the env's Box before the env sees them, as SB3 does (the control cost
+        # would otherwise charge the Gaussian's samples beyond +-1, which the env clips anyway)
+        .environment(env_id, env_config=dict(env_config or {}), clip_actions=True)
         # RLlib's 60 s default gives up on a runner still making its envs (numba's cache, imports)
         .env_runners(num_env_runners=num_env_runners, sample_timeout_s=600.0)
         .training(
