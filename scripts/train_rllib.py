@@ -7,8 +7,8 @@ Needs RLlib in a venv of its own (it pins Gymnasium 1.2.2; README, RLlib)::
     .venv-rllib/bin/python scripts/train_rllib.py --iterations 20 --env-runners 1
 
 ``--address host:port`` (or ``auto``) trains on a running Ray cluster (``ray start --head``);
-without it a local Ray starts. Each iteration prints the environment steps sampled so far, the
-mean return of the last 100 episodes that ended, and the wall time; ``--checkpoint DIR`` saves the
+without it a local Ray starts. Each iteration prints the environment steps sampled, the mean
+episode return of the episodes that ended, and the wall time; ``--checkpoint DIR`` saves the
 algorithm at the end (``Algorithm.from_checkpoint(DIR)`` restores it).
 """
 
@@ -59,7 +59,8 @@ def main(argv: list[str] | None = None) -> None:
         ret = float(runners.get("episode_return_mean", math.nan))
         print(
             f"iteration {result['training_iteration']:3d}: {int(result.get('num_env_steps_sampled_lifetime', 0)):8,} "
-            f"steps, episode return mean {ret:8.3f} (the last 100 episodes), {time.time() - t0:6.1f} s"
+            f"steps, {int(runners.get('num_episodes_lifetime', 0)):4d} episodes, "
+            f"episode return mean {ret:8.3f}, {time.time() - t0:6.1f} s"
         )
     if args.checkpoint:
         print(f"saved {algo.save_to_path(args.checkpoint)}")
