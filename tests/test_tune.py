@@ -20,6 +20,7 @@ from test_ray import enter_loopback_namespace
 
 from soft_snake_gym.cli import main
 from soft_snake_gym.config import ConfigError, load_yaml
+from soft_snake_gym.distributed import RAY_INSTALL
 from soft_snake_gym.training.tune import SEARCH_SPACE, TuneSettings
 
 TINY = [
@@ -53,6 +54,18 @@ def test_an_unreachable_address_is_one_line(capsys, tmp_path):
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1
     assert "no Ray cluster answers there" in err
+    assert not (tmp_path / "t").exists()
+
+
+def test_tune_without_ray_is_one_line_naming_the_install(tmp_path):
+    # a Python where `import ray` fails, as without the ray extra
+    code = (
+        "import sys; sys.modules['ray'] = None; from soft_snake_gym.cli import main; "
+        f"sys.exit(main(['tune', '--trials', '1', '--out', {str(tmp_path / 't')!r}]))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert "soft-snake tune: error:" in done.stderr and RAY_INSTALL in done.stderr
     assert not (tmp_path / "t").exists()
 
 
