@@ -24,6 +24,7 @@ from soft_snake_gym.cli import (
     reproduce,
     sweep,
     train,
+    tune,
 )
 from soft_snake_gym.cli.common import USER_ERRORS, CLIError, Parser
 
@@ -40,6 +41,7 @@ COMMANDS: tuple[ModuleType, ...] = (
     compare,
     benchmark,
     convergence,
+    tune,
 )
 
 

@@ -33,9 +33,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--algo", default="PPO", type=str.upper, choices=ALGOS, help="algorithm (default PPO)")
     p.add_argument(
         "--config",
+        "--hyperparams-file",
+        dest="config",
         metavar="YAML",
-        help="zoo-style hyperparameter file keyed by env id (default: the package's "
-        "configs/algorithm/<algo>.yml)",
+        help="zoo-style hyperparameter file keyed by env id, e.g. soft-snake tune's best.yml (default: "
+        "the package's configs/algorithm/<algo>.yml)",
     )
     p.add_argument(
         "--hyperparams",

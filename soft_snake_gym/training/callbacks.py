@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from soft_snake_gym.agents import TrainedPolicy, make_policy
@@ -19,11 +20,18 @@ from soft_snake_gym.training.run import save_checkpoint
 __all__ = ["make_callbacks"]
 
 
-def make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start: int = 0):
+def make_callbacks(
+    cfg: TrainConfig,
+    run_dir: Path,
+    started: float,
+    stage_start: int = 0,
+    on_eval: Callable[[dict[str, float]], None] | None = None,
+):
     """Checkpoints and the baseline evaluation.
 
     ``wall_s`` counts from ``started``; the best model is the best evaluation since ``stage_start``
-    (returns of a curriculum's earlier stages used other rewards).
+    (returns of a curriculum's earlier stages used other rewards). ``on_eval`` is called with each
+    evaluation's learning_curve.csv row once it is written (``soft-snake tune`` reports it to Tune).
     """
     # here, not above: SB3 and torch take seconds to import
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList
@@ -101,6 +109,8 @@ def make_callbacks(cfg: TrainConfig, run_dir: Path, started: float, stage_start:
                 self.model.save(run_dir / "best_model.zip")
                 if vn is not None:
                     vn.save(str(run_dir / "best_vecnormalize.pkl"))
+            if on_eval is not None:
+                on_eval(row)
             return True
 
         def _on_training_end(self) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -142,6 +143,7 @@ def train(
     resume: bool = False,
     progress: bool = True,
     command: list[str] | None = None,
+    on_eval: Callable[[dict[str, float]], None] | None = None,
 ) -> Path:
     """Train (or, with ``resume``, continue) a run in ``run_dir``; returns the final model path.
 
@@ -150,7 +152,8 @@ def train(
     run left no checkpoint. Training stops at :func:`planned_steps` (the total rounded up to
     whole rollouts). An interrupt (Ctrl-C, or SIGTERM from a scheduler or ``kill``) saves a
     checkpoint before the exception propagates (:class:`Terminated` for SIGTERM); a killed
-    run resumes from its last periodic checkpoint.
+    run resumes from its last periodic checkpoint. ``on_eval`` is called with each evaluation's
+    learning-curve row (``timesteps``, ``wall_s``, ``<metric>_mean``/``_std``, ``baseline_<metric>``).
 
     Raises:
         ConfigError: an unknown env id, a resume folder without a checkpoint, a folder that
@@ -206,7 +209,7 @@ def train(
                 raise
     try:
         stage_start = model.num_timesteps if resume and _is_new_stage(cfg, run_dir) else 0
-        callbacks = make_callbacks(cfg, run_dir, started, stage_start)  # checks the baseline
+        callbacks = make_callbacks(cfg, run_dir, started, stage_start, on_eval)  # checks the baseline
         if resume:  # every check passed: now the folder is written
             _record_resume(cfg, run_dir, command)
         else:
