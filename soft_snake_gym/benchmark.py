@@ -96,10 +96,12 @@ class _SingleCase:
 class _VectorCase:
     """A vector env (batched or ``SyncVectorEnv``) with autoreset; rate in robot-steps/s."""
 
+    reset_seed: int | None = 0
+
     def __init__(self, make: Callable[[], Any], robots: int, actions: np.ndarray | None = None) -> None:
         self.env = make()
         self.dt = self._dt()
-        self.env.reset(seed=0)
+        self.env.reset(seed=self.reset_seed)
         rng = np.random.default_rng(0)
         if actions is None:
             actions = rng.uniform(-1, 1, (32,) + self.env.action_space.shape).astype(np.float32)
@@ -128,14 +130,23 @@ class _VectorCase:
 class _EnvPoolCase(_VectorCase):
     """EnvPool's ``Swimmer-v4`` with ``robots`` envs on ``threads`` threads (it autoresets itself)."""
 
+    reset_seed = None  # EnvPool takes its seed at creation
+
     def __init__(self, robots: int, threads: int) -> None:
         import envpool  # here: optional (the bench extra), and only this case needs it
 
+        rng = np.random.default_rng(0)
         super().__init__(
             lambda: envpool.make(
-                "Swimmer-v4", env_type="gymnasium", num_envs=robots, batch_size=robots, num_threads=threads
+                "Swimmer-v4",
+                env_type="gymnasium",
+                num_envs=robots,
+                batch_size=robots,
+                num_threads=threads,
+                seed=0,
             ),
             robots,
+            rng.uniform(-1, 1, (32, robots, 2)),  # its action_space is one env's, (2,)
         )
 
     def _dt(self) -> float:
