@@ -371,6 +371,10 @@ class Integrator:
         newton_tol: tolerance of a Newton step on the momentum residual divided by the node
             masses, max-norm [m/s].
         newton_max_iter: iteration cap; a step that does not converge is reported as a failure.
+        newton_chord_rate: modified Newton off the ground: after an iteration that shrank the
+            residual by at least this factor, the next one reuses its Jacobian's factorization (a
+            chord step: one solve and one residual) instead of a new Jacobian; the tolerance is
+            the same, so only the rounding of the converged step changes. 0 turns reuse off.
         max_strain: a step with ``| |e|/lbar - 1 |`` above this is reported as runaway stretch.
         check_self_intersection: test the body for crossing edges after every step.
     """
@@ -380,6 +384,7 @@ class Integrator:
     substeps: int | None = None
     newton_tol: float = 1e-6
     newton_max_iter: int = 30
+    newton_chord_rate: float = 0.1
     max_strain: float = 0.5
     check_self_intersection: bool = True
 
@@ -394,6 +399,7 @@ class Integrator:
             _check_int(self, "substeps", 1, 1_000_000)
         _check(self, "newton_tol", 0.0, None, lo_open=True)
         _check_int(self, "newton_max_iter", 1, 10_000)
+        _check(self, "newton_chord_rate", 0.0, 1.0, hi_open=True)
         _check(self, "max_strain", 0.0, None, lo_open=True)
         if not isinstance(self.check_self_intersection, bool):
             raise ValueError(

@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 
+from soft_snake_gym.benchmark import format_report, run_benchmark
 from soft_snake_gym.cli import main
 from soft_snake_gym.physics.cache import drop_stale_cache
 
@@ -27,6 +28,8 @@ def test_benchmark_cli_writes_json_and_png(tmp_path, capsys):
             "12",
             "--node-robots",
             "2",
+            "--envpool-robots",
+            "3",
             "--json",
             str(out),
             "--quiet",
@@ -36,17 +39,42 @@ def test_benchmark_cli_writes_json_and_png(tmp_path, capsys):
     res = json.loads(out.read_text())
     assert (tmp_path / "bench.png").stat().st_size > 10_000
     cases = [r["case"] for r in res["throughput"]]
-    assert cases[:3] == ["SoftEel-v0 gym.make", "SoftWorm-v0 gym.make", "SoftEel-v0 batched n=2 threads=1"]
+    assert cases[:4] == [
+        "SoftEel-v0 gym.make",
+        "SoftWorm-v0 gym.make",
+        "SoftEel-v0 batched n=2 threads=1",
+        "SoftWorm-v0 batched n=2 threads=1",
+    ]
     assert all(r["steps_per_s"] > 0 for r in res["throughput"])
+    # simulated time per wall second is steps/s times each env's own control step
+    dts = {r["case"].split()[0]: r["dt"] for r in res["throughput"]}
+    assert dts["SoftEel-v0"] == dts["SoftWorm-v0"] == 0.01
+    for r in res["throughput"]:
+        assert abs(r["sim_s_per_s"] - r["steps_per_s"] * r["dt"]) < 1e-9 * r["sim_s_per_s"]
     assert [r["N"] for r in res["nodes"]] == [10, 12]
     assert 0 < res["kernel_share"]["SoftEel-v0 batched n=2 threads=1"] < 1
     text = capsys.readouterr().out
-    assert "targets (ratios measured in this run)" in text and str(out) in text
+    assert "targets (ratios measured in this run" in text and str(out) in text
     if res["mujoco"] == "installed":
         assert "Swimmer-v5 gym.make" in cases
         assert res["ratios"]["single_vs_swimmer"] > 0 and res["ratios"]["worm_single_vs_swimmer"] > 0
+        assert dts["Swimmer-v5"] == 0.04
     else:
         assert "Swimmer-v5 rows skipped" in text
+    if res["envpool"] == "installed":
+        pool = [r for r in res["throughput"] if r["case"].startswith("EnvPool Swimmer-v4")]
+        assert [r["robots"] for r in pool] == [1, 3]
+        assert all(abs(r["dt"] - 0.04) < 1e-12 for r in pool)  # frame_skip 4 x timestep 0.01
+    else:
+        assert "EnvPool Swimmer-v4 rows skipped" in text
+
+
+def test_benchmark_without_envpool_says_so_and_skips_its_rows(monkeypatch):
+    monkeypatch.setitem(sys.modules, "envpool", None)  # as if not installed: import raises
+    res = run_benchmark(seconds=0.02, repeats=1, robots=(2,), ppo=False, nodes=())
+    assert not any(r["case"].startswith("EnvPool") for r in res["throughput"])
+    assert "pip install 'soft-snake-gym[bench]'" in res["envpool"]
+    assert "EnvPool Swimmer-v4 rows skipped" in format_report(res)
 
 
 def test_benchmark_rejects_bad_options(capsys):
@@ -87,3 +115,6 @@ def test_ppo_timing_runs_from_the_command_line_with_subprocess_workers(tmp_path)
     ppo = {r["kind"]: r for r in json.loads(out.read_text())["ppo"]}
     assert set(ppo) == {"batched", "subproc"}
     assert all(r["steps_per_s"] > 0 for r in ppo.values())
+    # the batched env's three training-throughput figures: stepping >= + inference, both > 0
+    b = ppo["batched"]
+    assert b["step_steps_per_s"] > 0 and b["inference_steps_per_s"] > 0

@@ -34,6 +34,8 @@ CONFIGS = Path(__file__).resolve().parents[1] / "soft_snake_gym" / "configs" / "
         (lambda: Integrator(h=0.0), "Integrator.h", "0.0"),
         (lambda: Integrator(method="rk4"), "Integrator.method", "rk4"),
         (lambda: Integrator(substeps=0), "Integrator.substeps", "0"),
+        (lambda: Integrator(newton_chord_rate=1.0), "Integrator.newton_chord_rate", "1.0"),
+        (lambda: Integrator(newton_chord_rate=-0.1), "Integrator.newton_chord_rate", "-0.1"),
         (lambda: SimConfig(medium="lava"), "SimConfig.medium", "lava"),
     ],
 )

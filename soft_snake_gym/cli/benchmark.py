@@ -14,13 +14,14 @@ from soft_snake_gym import plots
 from soft_snake_gym.benchmark import (
     DEFAULT_NODES,
     DEFAULT_ROBOTS,
+    ENVPOOL_ROBOTS,
     format_report,
     run_benchmark,
 )
 from soft_snake_gym.cli.common import CLIError
 
 NAME = "benchmark"
-HELP = "steps per second of the envs, batched env, PPO, against MuJoCo's Swimmer-v5"
+HELP = "steps per second of the envs, batched env, PPO, against MuJoCo's Swimmer-v5 and EnvPool's Swimmer-v4"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -52,6 +53,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--node-robots", type=int, default=64, help="robots in the cost-against-N rows (default 64)"
     )
+    p.add_argument(
+        "--envpool-robots",
+        type=int,
+        default=ENVPOOL_ROBOTS,
+        help=f"envs of the EnvPool Swimmer-v4 batch row (default {ENVPOOL_ROBOTS})",
+    )
     p.add_argument("--json", default="benchmark.json", help="results file (default benchmark.json)")
     p.add_argument("--png", default=None, help="figure (default: the JSON's name with .png)")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
@@ -63,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         raise CLIError(
             f"--seconds {args.seconds} and --repeats {args.repeats}: need seconds > 0 and repeats >= 1"
         )
-    bad = [n for n in args.robots + [args.sync_robots, args.node_robots] if n < 1] + [
+    bad = [n for n in args.robots + [args.sync_robots, args.node_robots, args.envpool_robots] if n < 1] + [
         N for N in args.nodes if N < 3
     ]
     if bad:
@@ -85,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
         ppo_n_envs=args.ppo_n_envs,
         nodes=tuple(args.nodes),
         node_robots=args.node_robots,
+        envpool_robots=args.envpool_robots,
         progress=progress,
     )
     report = format_report(res)

@@ -158,6 +158,8 @@ class SoftRobotEnv(gym.Env):
         if task is None:
             task = T.allocate_task(self.N, self._act_shape[0], box.shape[0], n_path=self.n_path)
         self.task = task
+        # the compiled step's arguments, built once: plain tuples (see physics.layout)
+        self._kernel_args = (tuple(self.sim.arrays), tuple(task))
         task.low[:] = box.low
         task.high[:] = box.high
         task.w[:] = self._mass_fraction
@@ -341,7 +343,7 @@ class SoftRobotEnv(gym.Env):
             act[:] = action
         else:
             act[:] = self._check_action(action)
-        status = T.robot_step(tuple(self.sim.arrays), tuple(task))  # plain tuples: see physics.layout
+        status = T.robot_step(*self._kernel_args)
         if status == T.BAD_ACTION:
             a = np.asarray(action, dtype=np.float64)
             bad = np.flatnonzero(~np.isfinite(a)).tolist()

@@ -1,9 +1,21 @@
-"""Banded LU with partial pivoting for the (2N x 2N) Newton and mass matrices.
+"""Banded LU for the (2N x 2N) Newton and mass matrices, with row exchanges only where needed.
 
 Storage (LAPACK ``gbtrf`` layout, row-major): ``A[i, j]`` lives at ``J[i, j - i + KL]``.
 Each row keeps ``2 KL + KU + 1`` slots so that pivoting's fill-in fits. With interleaved
 (x, y) ordering the bending stencil couples nodes two apart, so ``KL = KU = 5``.
-Cost is O(n KL (KL + KU)): linear in N.
+
+:func:`band_factor` is LU with threshold pivoting: a column keeps its diagonal pivot when it is
+at least ``PIVOT_THRESHOLD`` times the column's largest entry below it, and only otherwise takes
+the row of that entry (partial pivoting). The backward-Euler matrix (mass, added mass, the
+elastic Hessian, the drag Jacobian, all scaled by the step) has a dominant diagonal, so in
+practice no row moves and the factors keep the band's upper width ``KU``: half the work of
+:func:`band_lu`, whose partial pivoting fills the upper band to ``KL + KU``. Where a row must
+move (a matrix that is far from diagonally dominant) it falls back to the exchange and the
+fill-in, and the growth of the factors stays bounded by ``1 + 1/PIVOT_THRESHOLD`` per step.
+(The matrix is not symmetric: the drag's and the damping's position derivatives, the water's
+gyroscopic terms and the stuck contacts' rows make it not, so a Cholesky or LDL^T factorization
+of it would be a different, inexact Newton; see docs/performance.md.)
+Cost is O(n KL KU) without exchanges, O(n KL (KL + KU)) with: linear in N.
 """
 
 from __future__ import annotations
@@ -14,24 +26,33 @@ from numba import njit
 KL = 5
 KU = 5
 WIDTH = 2 * KL + KU + 1
+PIVOT_THRESHOLD = 0.1
+"""A diagonal pivot at least this fraction of its column's largest entry is kept (no row exchange)."""
 
 
-@njit(cache=True, error_model="numpy")
-def band_lu(J: np.ndarray, piv: np.ndarray, n: int) -> bool:
-    """Factor the band matrix in ``J`` in place; returns False if it is singular."""
+@njit(cache=True, inline="always", error_model="numpy")
+def _factor(J, piv, n, threshold):
+    """LU of the band in ``J`` in place, exchanging rows where the diagonal is below ``threshold`` of its column's largest entry."""
+    reach = 0  # the last column a row exchange has filled in
     for k in range(n):
+        diag = abs(J[k, KL])
         p = k
-        best = abs(J[k, KL])
+        best = diag
         imax = min(n, k + KL + 1)
         for i in range(k + 1, imax):
             val = abs(J[i, k - i + KL])
             if val > best:
                 best = val
                 p = i
+        if diag >= threshold * best:
+            p = k
+            best = diag
         piv[k] = p
         if best == 0.0:
             return False
-        jmax = min(n - 1, k + KL + KU)
+        if p != k:
+            reach = max(reach, p + KU)
+        jmax = min(n - 1, max(k + KU, reach))
         if p != k:
             for j in range(k, jmax + 1):
                 tmp = J[k, j - k + KL]
@@ -48,11 +69,30 @@ def band_lu(J: np.ndarray, piv: np.ndarray, n: int) -> bool:
 
 
 @njit(cache=True, error_model="numpy")
+def band_factor(J: np.ndarray, piv: np.ndarray, n: int, threshold: float) -> bool:
+    """Factor the band matrix in ``J`` in place with threshold pivoting; returns False if it is singular.
+
+    A diagonal pivot at least ``threshold`` times its column's largest entry below it is kept
+    (``PIVOT_THRESHOLD``, or 1.0 for partial pivoting). ``piv[k]`` is the row exchanged with
+    row k (k itself: none). Solve with :func:`band_solve`.
+    """
+    return _factor(J, piv, n, threshold)
+
+
+@njit(cache=True, error_model="numpy")
+def band_lu(J: np.ndarray, piv: np.ndarray, n: int) -> bool:
+    """Factor the band matrix in ``J`` in place with partial pivoting; returns False if it is singular."""
+    return _factor(J, piv, n, 1.0)
+
+
+@njit(cache=True, error_model="numpy")
 def band_solve(J: np.ndarray, piv: np.ndarray, n: int, b: np.ndarray) -> None:
-    """Solve ``A x = b`` in place in ``b`` with the factors from :func:`band_lu`."""
+    """Solve ``A x = b`` in place in ``b`` with the factors of :func:`band_factor` or :func:`band_lu`."""
+    reach = 0
     for k in range(n):
         p = piv[k]
         if p != k:
+            reach = max(reach, p + KU)
             tmp = b[k]
             b[k] = b[p]
             b[p] = tmp
@@ -62,7 +102,8 @@ def band_solve(J: np.ndarray, piv: np.ndarray, n: int, b: np.ndarray) -> None:
                 b[i] -= J[i, k - i + KL] * bk
     for k in range(n - 1, -1, -1):
         s = b[k]
-        for j in range(k + 1, min(n, k + KL + KU + 1)):
+        # row k of U reaches at most k + KL + KU, and without exchanges k + KU
+        for j in range(k + 1, min(n - 1, k + KL + KU, max(k + KU, reach)) + 1):
             s -= J[k, j - k + KL] * b[j]
         b[k] = s / J[k, KL]
 

@@ -13,7 +13,14 @@ import math
 from numba import njit
 
 from soft_snake_gym.physics import banded, geometry, layout
-from soft_snake_gym.physics.banded import KL, add_block, add_edge_pattern, band_lu, band_solve
+from soft_snake_gym.physics.banded import (
+    KL,
+    PIVOT_THRESHOLD,
+    add_block,
+    add_edge_pattern,
+    band_factor,
+    band_solve,
+)
 from soft_snake_gym.physics.cache import drop_stale_cache
 from soft_snake_gym.physics.geometry import edge_frame, node_tangent, turning, turning_rate
 from soft_snake_gym.physics.layout import (
@@ -311,7 +318,7 @@ def solve_mass(q, prm, m, F, a, J, piv, water):
         J[i, KL] = m[i]
         a[i] = F[i]
     added_mass(q, prm, a, a, J, 1.0, False, True)
-    band_lu(J, piv, n)
+    band_factor(J, piv, n, PIVOT_THRESHOLD)  # M + M_A: symmetric positive definite
     band_solve(J, piv, n, a)
 
 

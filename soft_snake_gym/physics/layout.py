@@ -40,7 +40,8 @@ P_DSTRETCH = 21
 P_ADDED_MASS = 22  # ADDED_MASS_* code
 
 P_ANISO, P_MU_FWD, P_MU_BWD, P_MU_LAT = 23, 24, 25, 26  # anisotropic kinetic friction
-N_PRM = 27
+P_CHORD = 27  # Integrator.newton_chord_rate
+N_PRM = 28
 
 ADDED_MASS_CONSISTENT, ADDED_MASS_KELASIDI = 0, 1
 

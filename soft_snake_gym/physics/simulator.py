@@ -82,6 +82,7 @@ def pack_params(config: SimConfig, prm: np.ndarray) -> None:
     prm[L.P_SUBSTEPS] = auto_substeps(config)
     prm[L.P_TOL] = it.newton_tol
     prm[L.P_MAXIT] = it.newton_max_iter
+    prm[L.P_CHORD] = it.newton_chord_rate
     prm[L.P_MEDIUM] = _MEDIA[config.medium]
     prm[L.P_METHOD] = _METHODS[it.method]
     prm[L.P_MAXSTRAIN] = it.max_strain

@@ -13,7 +13,7 @@ import math
 from numba import njit
 
 from soft_snake_gym.physics import banded, forces, geometry, layout
-from soft_snake_gym.physics.banded import KL, add_block, band_lu, band_solve
+from soft_snake_gym.physics.banded import KL, PIVOT_THRESHOLD, add_block, band_factor, band_solve
 from soft_snake_gym.physics.cache import drop_stale_cache
 from soft_snake_gym.physics.forces import (
     actuator_power,
@@ -79,6 +79,7 @@ from soft_snake_gym.physics.layout import (
     OK,
     P_ADDED_MASS,
     P_CHECKSI,
+    P_CHORD,
     P_DBEND,
     P_DSTRETCH,
     P_G,
@@ -287,6 +288,9 @@ def _be_substep(s, dt, medium):
     norm2, rmax, p_fluid, p_fric = _be_residual(s, dt, medium, True)
     it = 0
     pass_it = 0
+    factored = False  # J holds the factors of an earlier iterate's Jacobian (a chord step)
+    fused = medium == MEDIUM_GROUND  # see the line search
+    chord_rate = prm[P_CHORD]  # Integrator.newton_chord_rate
     while True:
         if rmax <= tol:
             # stick-slip decided by the end of the step (docs/model.md §5): if a contact changes,
@@ -294,35 +298,58 @@ def _be_substep(s, dt, medium):
             if medium != MEDIUM_GROUND or not _update_contacts(v, buf, ibuf, prm, dt, n):
                 break
             norm2, rmax, p_fluid, p_fric = _be_residual(s, dt, medium, True)
+            factored = False
             pass_it = 0  # the iteration cap holds per contact pass
             continue
         if pass_it == maxit or not math.isfinite(norm2):
             return NOT_CONVERGED, it, rmax, p_fluid, p_fric
         it += 1
         pass_it += 1
+        chord = factored
+        if not factored:
+            if not band_factor(J, piv, n, PIVOT_THRESHOLD):
+                return NOT_CONVERGED, it, rmax, p_fluid, p_fric
+            factored = True
         for i in range(n):
             vacc[i] = v[i]
             dv[i] = -R[i]
-        if not band_lu(J, piv, n):
-            return NOT_CONVERGED, it, rmax, p_fluid, p_fric
         band_solve(J, piv, n, dv)
-        # backtracking line search on |R|^2. In water most steps converge after one Newton
-        # iteration, so trials skip the Jacobian; on the ground a pass takes several, so the
-        # full step's trial assembles it too and, accepted, serves the next iteration
-        fused = medium == MEDIUM_GROUND
+        # backtracking line search on |R|^2. Off the ground most steps converge in one or two
+        # iterations, so trials skip the Jacobian; a chord step (the factors of an earlier
+        # Jacobian) that does not descend at full length is not searched: the Jacobian is
+        # renewed. On the ground a contact pass takes several iterations, so the full step's
+        # trial assembles the Jacobian too and, accepted, serves the next iteration
         step = 1.0
         for _ in range(12):
             for i in range(n):
                 v[i] = vacc[i] + step * dv[i]
             trial = _be_residual(s, dt, medium, fused and step == 1.0)
-            if trial[0] < norm2 * (1.0 - 1e-4 * step):
+            if trial[0] < norm2 * (1.0 - 1e-4 * step) or chord:
                 break
             step *= 0.5
+        rmax_prev = rmax
+        if chord and not trial[0] < norm2 * (1.0 - 1e-4):
+            for i in range(n):
+                v[i] = vacc[i]
+            norm2, rmax, p_fluid, p_fric = _be_residual(s, dt, medium, True)
+            factored = False
+            continue
         norm2, rmax, p_fluid, p_fric = trial
-        if rmax > tol and pass_it < maxit and math.isfinite(norm2) and not (fused and step == 1.0):
-            # another iteration follows: the Jacobian at the accepted velocity (the residual
-            # is recomputed bit for bit)
+        if fused:
+            factored = False  # J was overwritten by the full step's Jacobian
+        if (
+            rmax > tol
+            and pass_it < maxit
+            and math.isfinite(norm2)
+            and not (fused and step == 1.0)
+            and not (not fused and step == 1.0 and rmax <= chord_rate * rmax_prev)
+        ):
+            # the next iteration renews the Jacobian, at the accepted velocity (the residual is
+            # recomputed bit for bit); off the ground, after a fast contraction, it keeps the factors
+            # (modified Newton: a solve and a residual per iteration, to the same tolerance). Not
+            # on the ground, where the full step's trial has already renewed the Jacobian
             _be_residual(s, dt, medium, True)
+            factored = False
     return OK, it, rmax, p_fluid, p_fric
 
 
