@@ -10,12 +10,10 @@ two nodes with one CPU each serves the whole module; the commands reach it throu
 from __future__ import annotations
 
 import csv
-import ctypes
 import json
 import math
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -27,7 +25,6 @@ import pytest
 
 pytestmark = pytest.mark.ray
 
-CLONE_NEWNET = 0x40000000
 SWEEP = ["swim-gait", "--n-alpha", "2", "--n-omega", "2", "--cycles", "1", "--no-progress"]
 TINY = [
     "n_envs=2",
@@ -42,32 +39,9 @@ TINY = [
 TRAIN = ["train", "SoftEel-v0", "--n-timesteps", "256", "--no-progress", "--hyperparams", *TINY]
 
 
-def enter_loopback_namespace() -> None:
-    """Move this process into a new network namespace with loopback up (needs root)."""
-    if [name for _, name in socket.if_nameindex()] == ["lo"]:
-        return  # already in one (e.g. run under `unshare -n`)
-    libc = ctypes.CDLL(None, use_errno=True)
-    if libc.unshare(CLONE_NEWNET) != 0:
-        pytest.skip(
-            f"a network namespace needs root (unshare: {os.strerror(ctypes.get_errno())}); "
-            "run the Ray tests as root, or under `unshare -rn`"
-        )
-    subprocess.run(["ip", "link", "set", "lo", "up"], check=True)
-    assert [name for _, name in socket.if_nameindex()] == ["lo"]
-
-
 @pytest.fixture(scope="module")
-def cluster():
-    enter_loopback_namespace()
-    from ray.cluster_utils import Cluster
-
-    c = Cluster(initialize_head=True, head_node_args={"num_cpus": 1})
-    c.add_node(num_cpus=1)
-    c.wait_for_nodes()
-    try:
-        yield c
-    finally:
-        c.shutdown()
+def cluster(ray_cluster):
+    return ray_cluster
 
 
 def cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:

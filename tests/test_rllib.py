@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from test_ray import enter_loopback_namespace
+from conftest import enter_loopback_namespace
 
 from soft_snake_gym.config import ConfigError
 from soft_snake_gym.distributed import worker_runtime_env

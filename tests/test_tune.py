@@ -16,7 +16,6 @@ import time
 from pathlib import Path
 
 import pytest
-from test_ray import enter_loopback_namespace
 
 from soft_snake_gym.cli import main
 from soft_snake_gym.config import ConfigError, load_yaml
@@ -81,17 +80,9 @@ def test_bad_settings_are_refused_before_ray_starts():
 
 
 @pytest.fixture(scope="module")
-def loopback_cluster():
-    """A two-node Ray cluster (one CPU each) on 127.0.0.1, in this process's own network namespace."""
-    cluster_utils = pytest.importorskip("ray.cluster_utils")
+def loopback_cluster(ray_cluster):
     pytest.importorskip("optuna")
-    enter_loopback_namespace()
-    cluster = cluster_utils.Cluster(
-        initialize_head=True, head_node_args={"num_cpus": 1, "node_ip_address": "127.0.0.1"}
-    )
-    cluster.add_node(num_cpus=1, node_ip_address="127.0.0.1")
-    yield cluster.address
-    cluster.shutdown()
+    return ray_cluster.address
 
 
 def _curves(out: Path) -> dict[str, list[dict[str, str]]]:
