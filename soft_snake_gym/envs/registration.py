@@ -18,6 +18,7 @@ MAX_EPISODE_STEPS = 1000
 ENV_IDS = {
     "SoftEel-v0": "soft_snake_gym.envs.swim:SwimEnv",
     "SoftWorm-v0": "soft_snake_gym.envs.inch:InchEnv",
+    "SoftEelSegments-v0": "soft_snake_gym.multiagent.segments:SegmentsEnv",
 }
 VECTOR_ENTRY_POINTS = {
     "SoftEel-v0": "soft_snake_gym.envs.vector:SwimVectorEnv",
@@ -36,7 +37,7 @@ def register_envs() -> None:
                 id=env_id,
                 entry_point=entry_point,
                 max_episode_steps=MAX_EPISODE_STEPS,
-                vector_entry_point=VECTOR_ENTRY_POINTS[env_id],
+                vector_entry_point=VECTOR_ENTRY_POINTS.get(env_id),
             )
 
 

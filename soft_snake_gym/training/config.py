@@ -35,7 +35,7 @@ __all__ = [
 
 ALGOS = ("PPO", "SAC")
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
-DEFAULT_BASELINES = {"SoftEel-v0": "pid", "SoftWorm-v0": "inching-pid"}
+DEFAULT_BASELINES = {"SoftEel-v0": "pid", "SoftWorm-v0": "inching-pid", "SoftEelSegments-v0": "decentralized"}
 CONFIGS = CONFIG_DIR / "algorithm"
 
 #: The metrics (registry names) of each evaluation in a run's learning_curve.csv.

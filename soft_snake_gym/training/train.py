@@ -32,6 +32,18 @@ def make_train_env(cfg: TrainConfig, seed: int):
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
+    if cfg.env_id == "SoftEelSegments-v0":  # every agent a slot: one shared local policy
+        from soft_snake_gym.sb3 import SegmentVecEnv
+
+        if cfg.vec_env != "batched":
+            raise ConfigError(
+                f"vec_env = {cfg.vec_env!r}: SoftEelSegments-v0 trains on the batched segment adapter; "
+                "set vec_env: batched"
+            )
+        try:
+            return SegmentVecEnv(cfg.n_envs, seed=seed, **dict(cfg.env_kwargs))
+        except ValueError as err:
+            raise ConfigError(str(err)) from None
     if cfg.vec_env == "batched":
         from soft_snake_gym.sb3 import SoftVecEnv
 

@@ -1,0 +1,188 @@
+"""The segment team: PettingZoo's API, equality with SoftEel-v0, local terms, the SB3 adapter, bad input."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import soft_snake_gym  # noqa: F401  registers the ids
+from soft_snake_gym.envs import SwimEnv
+from soft_snake_gym.multiagent import SegmentsEnv, eel_segments_v0
+from soft_snake_gym.multiagent.policies import CentralizedTeam, DecentralizedTeam
+from soft_snake_gym.physics import forces
+from soft_snake_gym.policies import CurvaturePID, DecentralizedPhasePID
+
+pettingzoo_test = pytest.importorskip("pettingzoo.test")
+
+
+def test_pettingzoo_parallel_api_and_seed_tests_pass():
+    pettingzoo_test.parallel_api_test(eel_segments_v0.parallel_env(max_cycles=40), num_cycles=60)
+    pettingzoo_test.parallel_seed_test(lambda: eel_segments_v0.parallel_env(max_cycles=40))
+    pettingzoo_test.api_test(eel_segments_v0.env(max_cycles=20), num_cycles=30)
+
+
+def _rollout_team(policy_factory, steps, seed=3, **kwargs):
+    """The PettingZoo env driven by a team policy; per step the global state and the agents' infos."""
+    par = eel_segments_v0.parallel_env(**kwargs)
+    policy = policy_factory(par.team)
+    obs, _ = par.reset(seed=seed)
+    state, start = None, np.ones(1, bool)
+    states, speeds, x = [], [], []
+    for _ in range(steps):
+        team_obs = np.stack([obs[a] for a in par.agents])[None]
+        act, state = policy.predict(team_obs, state, start)
+        start = np.zeros(1, bool)
+        obs, rewards, term, trunc, infos = par.step({a: act[0, i : i + 1] for i, a in enumerate(par.agents)})
+        states.append(par.state())
+        speeds.append(infos["node_1"]["forward_speed"])
+        x.append(par.team.sim.x.copy())
+    return np.array(states), np.array(speeds), np.array(x), infos["node_1"]["metrics"]
+
+
+def _rollout_eel(policy_cls, steps, seed=3, **kwargs):
+    env = SwimEnv(**kwargs)
+    policy = policy_cls(env)
+    obs, _ = env.reset(seed=seed)
+    state, start = None, np.ones(1, bool)
+    states, speeds, x = [], [], []
+    for _ in range(steps):
+        act, state = policy.predict(obs[None], state, start)
+        start = np.zeros(1, bool)
+        obs, _, _, _, info = env.step(act[0])
+        states.append(obs)
+        speeds.append(info["forward_speed"])
+        x.append(env.sim.x.copy())
+    return np.array(states), np.array(speeds), np.array(x), info["metrics"]
+
+
+@pytest.mark.parametrize(
+    ("team_cls", "baseline"), [(CentralizedTeam, CurvaturePID), (DecentralizedTeam, DecentralizedPhasePID)]
+)
+def test_the_team_under_a_baseline_is_softeel_under_it_bit_for_bit(team_cls, baseline):
+    steps = 400
+    team = _rollout_team(lambda t: team_cls(baseline(t.swim), t), steps, randomize={"C_D": [1.5, 2.0]})
+    eel = _rollout_eel(baseline, steps, randomize={"C_D": [1.5, 2.0]})
+    for a, b in zip(team[:3], eel[:3], strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert team[3] == eel[3]
+    assert team[3]["distance"] > 0.2  # it swims: the comparison is of a real gait
+
+
+def test_local_powers_add_up_to_the_actuator_power_at_the_end_of_the_step():
+    env = SegmentsEnv(N=12)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        env.step(rng.uniform(-1, 1, 10).astype(np.float32))
+    _, reward, _, _, info = env.step(rng.uniform(-1, 1, 10).astype(np.float32))
+    s, t = env.sim.arrays, env.swim.task
+    total = forces.actuator_power(s.q, s.kbar, s.lbar, t.uk, np.zeros(11), s.prm)
+    weight = env.swim.settings.energy_cost_weight
+    local = info["agent_reward_energy"] / -weight  # |P_j|
+    signed = -s.prm[forces.P_EI] / s.lbar[0] * (env.swim.task.raw[:10] - s.kbar) * t.uk
+    np.testing.assert_allclose(np.abs(signed), local, rtol=1e-12)
+    assert signed.sum() == pytest.approx(total, rel=1e-10)
+    assert abs(total) > 1.0  # a real power, not zeros
+    # the team reward is the shared term plus the local ones
+    expected = info["reward_forward"] + info["agent_reward_energy"].sum() + info["agent_reward_ctrl"].sum()
+    assert info["agent_rewards"] == pytest.approx(
+        info["reward_forward"] + info["agent_reward_energy"] + info["agent_reward_ctrl"]
+    )
+    assert reward == pytest.approx(expected)
+
+
+def test_local_observation_reads_own_and_neighbour_entries_of_the_softeel_observation():
+    env = SegmentsEnv(N=8, neighbors="both", closure="open", observe_goal=True)
+    obs, _ = env.reset(seed=1)
+    swim = env.swim.task.obs
+    k = 6
+    assert list(env.layout.structure)[:3] == ["kappa", "kappa_dot", "kbar"]
+    assert obs.shape == (k, 9)
+    for j in range(k):
+        assert obs[j, 0] == swim[j] and obs[j, 1] == swim[k + j] and obs[j, 2] == swim[2 * k + j]
+        assert obs[j, 3] == (swim[j + 1] if j + 1 < k else 0.0)  # head-ward neighbour, open end
+        assert obs[j, 5] == (swim[j - 1] if j > 0 else 0.0)  # tail-ward neighbour
+        np.testing.assert_array_equal(obs[j, 7:], swim[3 * k + 2 :])  # goal direction
+    ring = SegmentsEnv(N=8)
+    obs, _ = ring.reset(seed=1)
+    assert obs[-1, 3] == ring.swim.task.obs[0] and obs[0, 5] == ring.swim.task.obs[k - 1]
+    # a lost message: node 3's neighbours read zeros for it, node 3 itself still measures itself
+    ring.lost_messages = np.zeros(k, bool)
+    ring.lost_messages[2] = True
+    lost = ring.observe()
+    assert lost[2, 0] == obs[2, 0] != 0.0
+    assert lost[1, 3] == 0.0 and lost[1, 4] == 0.0 and lost[3, 5] == 0.0 and lost[3, 6] == 0.0
+    assert lost[0, 3] == obs[0, 3] != 0.0
+
+
+def test_the_batched_adapter_gives_each_robot_the_single_env_numbers():
+    from soft_snake_gym.sb3 import SegmentVecEnv
+
+    venv = SegmentVecEnv(16, seed=5, max_episode_steps=30, N=10)
+    obs = venv.reset()
+    rng = np.random.default_rng(2)
+    acts = rng.uniform(-1, 1, (31, 16, 1)).astype(np.float32)
+    single = SegmentsEnv(N=10)
+    o1, _ = single.reset(seed=6)  # robot 1
+    np.testing.assert_array_equal(obs[8:], o1)
+    returns = []
+    for n in range(30):  # the 30th step ends the episodes by the time limit
+        obs, rewards, dones, infos = venv.step(acts[n])
+        returns.append(rewards[9])
+        o1, _, _, _, info1 = single.step(acts[n, 8:, 0])
+        if n < 29:
+            np.testing.assert_array_equal(obs[8:], o1)
+        np.testing.assert_allclose(rewards[8:], info1["agent_rewards"], rtol=1e-6)
+        assert dones.all() == (n == 29)
+        if n == 29:  # the time limit: every slot of both robots ends, with its last observation
+            np.testing.assert_array_equal(infos[9]["terminal_observation"], o1[1])
+            assert infos[9]["TimeLimit.truncated"] and infos[9]["episode"]["l"] == 30
+            return_1 = infos[9]["episode"]["r"]
+            assert return_1 == pytest.approx(float(np.sum(returns)), rel=1e-5)
+    with pytest.raises(ValueError, match="multiple of the agents per robot"):
+        SegmentVecEnv(12, N=10)
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda p: p.observation_space("node_9"), "node_9.*does not exist.*node_1 ... node_8"),
+        (lambda p: p.action_space("head"), "'head' does not exist"),
+        (lambda p: p.step({a: 0.0 for a in p.agents[:-1]}), r"missing \['node_8'\]"),
+        (lambda p: p.step({**{a: 0.0 for a in p.agents}, "node_11": 0.0}), r"unknown \['node_11'\]"),
+        (lambda p: p.step({a: np.zeros(2) for a in p.agents}), "action of node_1.*shape \\(1,\\)"),
+        (lambda p: p.step({a: np.nan for a in p.agents}), "action of node_1.*finite"),
+        (lambda p: p.step([0.0] * 8), "must be a dict"),
+    ],
+)
+def test_bad_agent_input_gets_a_clear_error(make, message):
+    par = eel_segments_v0.parallel_env()
+    par.reset(seed=0)
+    with pytest.raises(ValueError, match=message):
+        make(par)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"N": 2}, "N = 2"),
+        ({"N": 12, "rod": {"N": 10}}, "N = 12 and rod.N = 10 disagree"),
+        ({"neighbors": "left"}, "neighbors = 'left' is unknown; use one of both, head, tail, none"),
+        ({"closure": "ring"}, "closure = 'ring' is unknown"),
+        ({"observe_goal": "yes"}, "observe_goal = 'yes' must be True or False"),
+        ({"max_cycles": 0}, "max_cycles"),
+    ],
+)
+def test_bad_keywords_get_a_clear_error(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        eel_segments_v0.parallel_env(**kwargs)
+
+
+def test_body_length_is_a_keyword_and_gym_make_builds_the_team():
+    par = eel_segments_v0.parallel_env(N=14)
+    assert par.possible_agents[-1] == "node_12" and len(par.possible_agents) == 12
+    env = gym.make("SoftEelSegments-v0", N=20)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (18, 7) and env.action_space.shape == (18,)
+    assert env.spec.max_episode_steps == 1000
