@@ -22,6 +22,7 @@ from soft_snake_gym.cli import (
     evaluate,
     figures,
     reproduce,
+    robustness,
     sweep,
     train,
 )
@@ -40,6 +41,7 @@ COMMANDS: tuple[ModuleType, ...] = (
     compare,
     benchmark,
     convergence,
+    robustness,
 )
 
 

@@ -65,6 +65,9 @@ class TrainConfig:
         checkpoint_freq: save a checkpoint every this many environment steps.
         baseline: the baseline policy spec evaluated once per run on the same seeds
             (``none`` to skip).
+        imitate: a baseline spec the new agent first imitates before PPO trains it
+            (:mod:`soft_snake_gym.training.imitation`); ``none`` (default): start from scratch.
+        imitate_episodes: episodes of the baseline recorded for the imitation.
     """
 
     env_id: str
@@ -83,6 +86,8 @@ class TrainConfig:
     eval_seed: int = 1000
     checkpoint_freq: int = 50_000
     baseline: str = "default"
+    imitate: str = "none"
+    imitate_episodes: int = 16
 
     def __post_init__(self) -> None:
         """Check the values, raising ``ConfigError``."""
@@ -96,11 +101,16 @@ class TrainConfig:
             ("checkpoint_freq", 0),
             ("seed", 0),
             ("eval_seed", 0),
+            ("imitate_episodes", 1),
         ):
             value = plain_number(getattr(self, name), integer=True)
             if value is None or value < lo:
                 raise ConfigError(f"{name} = {getattr(self, name)!r} must be an integer >= {lo}")
             object.__setattr__(self, name, value)
+        if not isinstance(self.imitate, str):
+            raise ConfigError(
+                f"imitate = {self.imitate!r} must be a baseline spec (e.g. decentralized) or none"
+            )
         if self.vec_env not in ("dummy", "subproc", "batched"):
             raise ConfigError(f"vec_env = {self.vec_env!r} must be 'dummy', 'subproc' or 'batched'")
         if not isinstance(self.normalize, bool):

@@ -10,6 +10,7 @@ from soft_snake_gym.config import ConfigError
 from soft_snake_gym.envs.registration import importable_id
 from soft_snake_gym.training.callbacks import make_callbacks
 from soft_snake_gym.training.config import TrainConfig, _algo_class, check_env_id, planned_steps
+from soft_snake_gym.training.imitation import imitate
 from soft_snake_gym.training.run import (
     _check_new_run_dir,
     _checkpoint_walls,
@@ -141,6 +142,8 @@ def train(
     try:
         stage_start = model.num_timesteps if resume and _is_new_stage(cfg, run_dir) else 0
         callbacks = make_callbacks(cfg, run_dir, started, stage_start)  # checks the baseline
+        if cfg.imitate != "none" and not resume:  # a bad spec raises before the folder is written
+            imitate(model, cfg)
         if resume:  # every check passed: now the folder is written
             _record_resume(cfg, run_dir, command)
         else:
