@@ -69,7 +69,11 @@ def make_policy(spec: str, env: Any, config: str | Path | None = None) -> Any:
 
 def for_env(policy: Any, env: Any) -> Any:
     """``policy`` as it runs on ``env``: a single-agent policy on a segment team is shared by every agent."""
-    return SharedLocalPolicy(policy, getattr(policy, "name", "shared")) if segment_team(env) is not None else policy
+    return (
+        SharedLocalPolicy(policy, getattr(policy, "name", "shared"))
+        if segment_team(env) is not None
+        else policy
+    )
 
 
 def _looks_like_path(spec: str) -> bool:

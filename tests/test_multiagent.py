@@ -186,3 +186,80 @@ def test_body_length_is_a_keyword_and_gym_make_builds_the_team():
     obs, _ = env.reset(seed=0)
     assert obs.shape == (18, 7) and env.action_space.shape == (18,)
     assert env.spec.max_episode_steps == 1000
+
+
+def test_a_failed_actuator_holds_its_rest_curvature_and_a_lost_message_reaches_only_neighbours():
+    from soft_snake_gym.studies.robustness import Perturbation, Perturbed
+
+    env = Perturbed(SegmentsEnv(N=10), Perturbation(failed_node=3, lost_node=5, loss_fraction=1.0))
+    obs, _ = env.reset(seed=0)
+    kbar0 = env.unwrapped.sim.kbar.copy()
+    for _ in range(50):
+        obs, *_ = env.step(np.full(8, 0.5, np.float32))
+    kbar = env.unwrapped.sim.kbar
+    assert kbar[2] == kbar0[2]  # node 3 never moved its rest curvature
+    assert np.all(np.abs(kbar[[0, 1, 3, 4]] - kbar0[[0, 1, 3, 4]]) > 0.1)  # the others did
+    assert obs[4, 0] != 0.0  # node 5 measures itself
+    assert obs[3, 3] == obs[3, 4] == 0.0 and obs[5, 5] == obs[5, 6] == 0.0  # its neighbours lost it
+    eel = Perturbed(SwimEnv(), Perturbation(lost_node=5, loss_fraction=1.0))
+    obs, _ = eel.reset(seed=0)
+    obs, *_ = eel.step(np.full(8, 0.5, np.float32))
+    assert obs[4] == obs[12] == 0.0 and obs[3] != 0.0  # the centre lost node 5's kappa and rate
+    with pytest.raises(ValueError, match="node_9.*does not exist"):
+        Perturbed(SegmentsEnv(N=10), Perturbation(failed_node=9))
+
+
+@pytest.mark.slow
+def test_robustness_study_writes_tables_and_figures_and_a_failure_slows_the_eel(tmp_path):
+    from soft_snake_gym.studies.robustness import default_controllers, format_table, run_experiment
+
+    controllers = default_controllers(keys=("decentralized", "pid"))
+    kwargs = {"max_episode_steps": 400}
+    rows = run_experiment("failure", tmp_path, controllers, episodes=1, n_nodes=6, env_kwargs=kwargs)
+    assert (tmp_path / "failure.csv").is_file() and (tmp_path / "failure.png").is_file()
+    speed = {(r["setting"], r["controller"]): float(r["average_speed_mean"]) for r in rows}
+    assert len(speed) == 2 * 5
+    for c in ("decentralized PID", "centralized PID"):
+        assert speed[("none", c)] > 0.05
+        assert min(speed[(f"node_{j}", c)] for j in range(1, 5)) < 0.8 * speed[("none", c)]
+    assert "| node_2 |" in format_table("failure", rows)
+    again = run_experiment("failure", tmp_path, controllers, episodes=1, n_nodes=6, env_kwargs=kwargs)
+    assert [r["average_speed_mean"] for r in again] == [
+        str(r["average_speed_mean"]) for r in rows
+    ]  # read back
+
+
+@pytest.mark.slow
+def test_shared_policy_imitates_trains_and_runs_at_other_body_lengths(tmp_path):
+    import csv
+
+    from soft_snake_gym.agents import make_policy
+    from soft_snake_gym.evaluation import evaluate, make_eval_env, summarize
+    from soft_snake_gym.multiagent.policies import SharedLocalPolicy
+    from soft_snake_gym.training import load_train_config, train
+
+    overrides = {
+        "n_envs": 16,
+        "n_timesteps": 512,
+        "n_steps": 32,
+        "batch_size": 128,
+        "n_epochs": 1,
+        "learning_rate": 1e-5,
+        "eval_freq": 512,
+        "eval_episodes": 1,
+        "checkpoint_freq": 512,
+        "imitate": "decentralized",
+        "imitate_episodes": 3,
+        "env_kwargs": {"max_episode_steps": 400},
+    }
+    run = tmp_path / "run"
+    train(load_train_config("SoftEelSegments-v0", overrides=overrides), run, progress=False)
+    row = list(csv.DictReader(open(run / "learning_curve.csv")))[0]  # at the first step: imitation only
+    # the imitated shared policy swims like the decentralized PID it copied
+    assert float(row["baseline_average_speed"]) > 0.05
+    assert float(row["average_speed_mean"]) > 0.7 * float(row["baseline_average_speed"])
+    env = make_eval_env("SoftEelSegments-v0", seed=0, env_kwargs={"N": 14, "max_episode_steps": 300})
+    policy = make_policy(str(run), env)
+    assert isinstance(policy, SharedLocalPolicy)
+    (summary,) = [summarize(evaluate(policy, env, episodes=1))]
+    assert summary["average_speed"][0] > 0.0  # a policy of one node runs on a longer body

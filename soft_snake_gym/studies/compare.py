@@ -22,6 +22,7 @@ CHART = ("average_speed", "cost_of_transport", "return")
 DEFAULT_POLICIES = {
     "SoftEel-v0": ["zoo:ppo", "pid", "open-loop"],
     "SoftWorm-v0": ["zoo:ppo", "inching-pid", "inching"],
+    "SoftEelSegments-v0": ["zoo:ppo", "decentralized", "decentralized:closure=pacemaker", "pid"],
 }
 
 

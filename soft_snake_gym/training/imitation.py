@@ -124,5 +124,5 @@ def imitate(model: Any, cfg: TrainConfig, epochs: int = 30, batch_size: int = 10
             optimizer.zero_grad()
             (action_loss + 0.01 * value_loss).backward()
             optimizer.step()
-            losses = {"action_mse": float(action_loss), "value_mse": float(value_loss)}
+            losses = {"action_mse": action_loss.item(), "value_mse": value_loss.item()}
     return losses
