@@ -263,3 +263,22 @@ def test_shared_policy_imitates_trains_and_runs_at_other_body_lengths(tmp_path):
     assert isinstance(policy, SharedLocalPolicy)
     (summary,) = [summarize(evaluate(policy, env, episodes=1))]
     assert summary["average_speed"][0] > 0.0  # a policy of one node runs on a longer body
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["robustness", "wobble"], "unknown experiment 'wobble'; choose from failure, message, length"),
+        (["robustness", "failure", "--controllers", "mpc"], "controller 'mpc' is unknown"),
+        (["robustness", "message", "--lost-node", "9", "--controllers", "pid"], "node_9"),
+        (["robustness", "message", "--fractions", "1.5", "--controllers", "pid"], "loss fraction"),
+        (["compare", "SoftEelSegments-v0", "--policies", "pdi"], "unknown policy 'pdi'"),
+    ],
+)
+def test_bad_study_input_gets_one_line_and_exit_2(args, message, tmp_path, capsys):
+    from soft_snake_gym.cli import main
+
+    code = main([*args, "--out", str(tmp_path / ("x.png" if args[0] == "compare" else "out"))])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert message in err and len(err.splitlines()) == 1, err

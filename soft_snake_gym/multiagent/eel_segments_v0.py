@@ -32,7 +32,6 @@ from typing import Any
 
 import numpy as np
 
-from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.registration import MAX_EPISODE_STEPS
 from soft_snake_gym.multiagent.segments import SegmentsEnv, node_index
 from soft_snake_gym.params import check_int
@@ -190,11 +189,6 @@ class SegmentsParallelEnv(ParallelEnv):
     def close(self) -> None:
         """Close the renderer."""
         self.team.close()
-
-    @property
-    def reward_terms(self) -> tuple[str, ...]:
-        """Names of the reward terms in every agent's ``info``."""
-        return T.TERM_KEYS
 
 
 def parallel_env(**kwargs: Any) -> SegmentsParallelEnv:
