@@ -38,6 +38,22 @@ STAGES = {
         ["--n-timesteps", "1900000", "--hyperparams", "env_kwargs.integrator.substeps=4"],
         ["--n-timesteps", "2150000", "--hyperparams", "env_kwargs.integrator.substeps=16"],
     ],
+    # the shared local policy: imitation of the decentralized PID, then PPO, which stopped the eel
+    # by the first evaluation at 200k agent-steps; the best model is the imitation (docs/decentralized.md)
+    "SoftEelSegments-v0": [
+        [
+            "--n-timesteps",
+            "200000",
+            "--hyperparams",
+            "imitate=decentralized",
+            "imitate_episodes=16",
+            "learning_rate=1e-4",
+            "policy_kwargs.log_std_init=-2.0",
+            "env_kwargs.energy_cost_weight=0.006",
+            "eval_freq=200000",
+            "checkpoint_freq=200000",
+        ],
+    ],
 }
 
 
