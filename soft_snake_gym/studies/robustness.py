@@ -219,8 +219,9 @@ def run_experiment(
         progress: called with a line per finished cell.
 
     Returns:
-        One dict per (setting, controller): ``setting``, ``controller``, ``N`` and each metric's
-        mean and std (NaN where the controller cannot run, with the reason in ``note``).
+        The CSV's rows (strings, as read back), one per (setting, controller), this run's and any
+        earlier run's: ``setting``, ``controller``, ``N`` and each metric's mean and std (NaN where
+        the controller cannot run, with the reason in ``note``).
 
     Raises:
         ValueError: an unknown experiment, a bad number, a node that does not exist.
@@ -277,6 +278,8 @@ def run_experiment(
                 results.append(row)
                 if progress is not None:
                     progress(f"{experiment} {label:>8} {c.label:<20} {row['average_speed_mean']:.4f} m/s")
+    with open(path, newline="") as fh:  # every controller's cells, those of earlier runs too
+        results = list(csv.DictReader(fh))
     plot_experiment(experiment, results, out / f"{experiment}.png")
     return results
 
