@@ -213,15 +213,14 @@ def test_a_failed_actuator_holds_its_rest_curvature_and_a_lost_message_reaches_o
 def test_robustness_study_writes_tables_and_figures_and_a_failure_slows_the_eel(tmp_path):
     from soft_snake_gym.studies.robustness import default_controllers, format_table, run_experiment
 
-    controllers = default_controllers(keys=("decentralized", "pid"))
-    kwargs = {"max_episode_steps": 400}
-    rows = run_experiment("failure", tmp_path, controllers, episodes=1, n_nodes=6, env_kwargs=kwargs)
+    controllers = default_controllers(keys=("decentralized",))
+    kwargs = {"max_episode_steps": 600}
+    rows = run_experiment("failure", tmp_path, controllers, episodes=1, env_kwargs=kwargs)
     assert (tmp_path / "failure.csv").is_file() and (tmp_path / "failure.png").is_file()
-    speed = {(r["setting"], r["controller"]): float(r["average_speed_mean"]) for r in rows}
-    assert len(speed) == 2 * 5
-    for c in ("decentralized PID", "centralized PID"):
-        assert speed[("none", c)] > 0.05
-        assert min(speed[(f"node_{j}", c)] for j in range(1, 5)) < 0.8 * speed[("none", c)]
+    speed = {r["setting"]: float(r["average_speed_mean"]) for r in rows}
+    assert len(speed) == 9  # none, node_1 ... node_8
+    assert speed["none"] > 0.05
+    assert min(speed[f"node_{j}"] for j in range(1, 9)) < 0.5 * speed["none"]  # a failure near the head
     assert "| node_2 |" in format_table("failure", rows)
     again = run_experiment("failure", tmp_path, controllers, episodes=1, n_nodes=6, env_kwargs=kwargs)
     assert again == rows  # read back from the CSV, nothing run again
