@@ -279,3 +279,15 @@ def test_bad_study_input_gets_one_line_and_exit_2(args, message, tmp_path, capsy
     err = capsys.readouterr().err.strip()
     assert code == 2
     assert message in err and len(err.splitlines()) == 1, err
+
+
+@pytest.mark.slow
+def test_shipped_shared_policy_swims_like_the_decentralized_pid_it_imitated():
+    """docs/decentralized.md: as fast and as efficient as DecentralizedPhasePID on seed 0 (not a selection seed)."""
+    from soft_snake_gym.studies.compare import compare
+
+    res = compare("SoftEelSegments-v0", ["zoo:ppo", "decentralized"], episodes=1, seed=0)
+    agent, base = res["zoo:ppo"], res["decentralized"]
+    assert base["average_speed"][0] > 0.1
+    assert agent["average_speed"][0] > 0.95 * base["average_speed"][0]
+    assert agent["cost_of_transport"][0] < 1.05 * base["cost_of_transport"][0]
