@@ -42,6 +42,22 @@ STAGES = {
     # shipped agent is the evaluation at 100k steps (docs/navigation.md: the shared machine allowed
     # no more). No path-following agent is shipped yet.
     "SoftEelGoal-v0": [["--n-timesteps", "100000"]],
+    # the shared local policy: imitation of the decentralized PID, then PPO, which stopped the eel
+    # by the first evaluation at 200k agent-steps; the best model is the imitation (docs/decentralized.md)
+    "SoftEelSegments-v0": [
+        [
+            "--n-timesteps",
+            "200000",
+            "--hyperparams",
+            "imitate=decentralized",
+            "imitate_episodes=16",
+            "learning_rate=1e-4",
+            "policy_kwargs.log_std_init=-2.0",
+            "env_kwargs.energy_cost_weight=0.006",
+            "eval_freq=200000",
+            "checkpoint_freq=200000",
+        ],
+    ],
 }
 #: held-out seeds of the navigation comparison (training uses 0..7 and evaluates on 1000..)
 NAV_SEED, NAV_EPISODES = "100", "20"

@@ -16,12 +16,14 @@ from typing import Any
 import numpy as np
 
 from soft_snake_gym.config import ConfigError
+from soft_snake_gym.multiagent.policies import SharedLocalPolicy, segment_team, team_policy
 from soft_snake_gym.policies import BASELINES, make_baseline, parse_policy_spec
 from soft_snake_gym.policies.base import PolicyEnvMismatch, _unwrap_one
 
 __all__ = [
     "ZOO",
     "TrainedPolicy",
+    "for_env",
     "latest_checkpoint",
     "load_model",
     "load_trained",
@@ -51,12 +53,27 @@ def make_policy(spec: str, env: Any, config: str | Path | None = None) -> Any:
         ConfigError: unknown name or key, malformed option, missing model file.
         PolicyEnvMismatch: the policy cannot control this env.
     """
+    if segment_team(env) is not None:  # the segment team: its baselines and shared local policies
+        if spec.startswith("zoo:"):
+            spec = str(zoo_path(segment_team(env).env_id, spec[4:]))
+        name, _ = parse_policy_spec(spec)
+        trained = load_trained if name not in BASELINES and _looks_like_path(spec) else None
+        return team_policy(spec, env, config, trained)
     if spec.startswith("zoo:"):  # an agent shipped with the package
         return load_trained(zoo_path(_unwrap_one(env).env_id, spec[4:]), env)
     name, _ = parse_policy_spec(spec)
     if name not in BASELINES and _looks_like_path(spec):  # a run folder or model zip
         return load_trained(spec, env)
     return make_baseline(spec, env, config)
+
+
+def for_env(policy: Any, env: Any) -> Any:
+    """``policy`` as it runs on ``env``: a single-agent policy on a segment team is shared by every agent."""
+    return (
+        SharedLocalPolicy(policy, getattr(policy, "name", "shared"))
+        if segment_team(env) is not None
+        else policy
+    )
 
 
 def _looks_like_path(spec: str) -> bool:

@@ -25,6 +25,7 @@ __all__ = [
     "comparison_chart",
     "controller_comparison",
     "learning_curve",
+    "robustness_chart",
     "swim_snapshots",
     "sweep_heatmaps",
 ]
@@ -340,3 +341,38 @@ def benchmark_chart(res: dict[str, Any], path: str | Path) -> Path:
         ax2.legend(fontsize=8)
     fig.tight_layout()
     return _save(fig, path, dpi=120)
+
+
+def robustness_chart(
+    settings: Sequence[str],
+    series: dict[str, dict[str, list[float]]],
+    metrics: Sequence[tuple[str, str, str]],
+    xlabel: str,
+    path: str | Path,
+    title: str = "",
+) -> Path:
+    """One panel per metric: its value at each setting, one line (with markers) per controller.
+
+    Args:
+        settings: the x tick labels, in order.
+        series: controller -> metric key -> values, one per setting (NaN: not run there).
+        metrics: the panels' (key, label, unit).
+        xlabel: the x axis's label.
+        path: the PNG.
+        title: the figure's title.
+    """
+    fig = _figure(figsize=(5.2 * len(metrics), 3.8))
+    axes = fig.subplots(1, len(metrics), squeeze=False)[0]
+    x = np.arange(len(settings))
+    for ax, (key, label, unit) in zip(axes, metrics, strict=True):
+        for i, (name, values) in enumerate(series.items()):
+            ax.plot(x, values[key], marker="o", color=f"C{i}", label=name)
+        ax.set_xticks(x, list(settings), rotation=30 if len(settings) > 6 else 0)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(f"{label} [{unit}]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return _save(fig, path, dpi=110)

@@ -32,9 +32,11 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from soft_snake_gym.envs import task as T
+from soft_snake_gym.envs.registration import MAX_EPISODE_STEPS
 from soft_snake_gym.envs.vector import SoftVectorEnv
+from soft_snake_gym.multiagent.segments import SegmentsEnv, local_terms, split_kwargs
 
-__all__ = ["SoftVecEnv"]
+__all__ = ["SegmentVecEnv", "SoftVecEnv"]
 
 
 class SoftVecEnv(VecEnv):
@@ -163,6 +165,156 @@ class SoftVecEnv(VecEnv):
 
     def _indices(self, indices: VecEnvIndices) -> Iterable[int]:
         return self._get_indices(indices)
+
+
+class SegmentVecEnv(VecEnv):
+    """Every segment agent of ``n_envs // (N-2)`` eels as one slot of an SB3 ``VecEnv`` (parameter sharing).
+
+    Slot ``r (N-2) + j - 1`` is agent ``node_j`` of robot ``r``; one PPO policy over all slots
+    is one shared local policy. The robots are a batched
+    :class:`~soft_snake_gym.envs.vector.SoftVectorEnv` of ``SoftEel-v0`` (robot ``r`` seeded
+    ``seed + r``, bitwise the robot of ``gym.make("SoftEelSegments-v0")`` with that seed); local
+    observations and rewards are those of :mod:`soft_snake_gym.multiagent.segments`, computed from
+    the stacked arrays by the same functions. Episodes end for all agents of a robot at once; each
+    slot's ``info["episode"]`` has that agent's return.
+
+    Args:
+        n_envs: slots, a multiple of the agents per robot (N-2; 8 for the default N = 10).
+        seed: robot ``r`` is seeded ``seed + r`` at the first reset; ``None``: unseeded.
+        max_episode_steps: time limit per episode (default 1000); ``None``: none.
+        num_threads: numba threads for the batched step (default: one per 64 robots).
+        **env_kwargs: :class:`~soft_snake_gym.multiagent.SegmentsEnv`'s keywords (``N``,
+            ``neighbors``, ``closure``, ``observe_goal`` and ``SoftEel-v0``'s).
+    """
+
+    def __init__(
+        self,
+        n_envs: int = 64,
+        *,
+        seed: int | None = None,
+        max_episode_steps: int | None = MAX_EPISODE_STEPS,
+        num_threads: int | None = None,
+        **env_kwargs: Any,
+    ) -> None:
+        """Build the batched robots (arguments in the class docstring)."""
+        proto = SegmentsEnv(**env_kwargs)  # checks every keyword, gives the layout
+        self.layout = layout = proto.layout
+        k = layout.n_agents
+        if not isinstance(n_envs, int | np.integer) or n_envs < k or n_envs % k:
+            raise ValueError(
+                f"n_envs = {n_envs!r} must be a positive multiple of the agents per robot, N - 2 = {k} "
+                f"(each robot gives {k} slots), e.g. {8 * k}"
+            )
+        self.n_robots = int(n_envs) // k
+        own, swim_kwargs = split_kwargs(env_kwargs)
+        self.venv = SoftVectorEnv(
+            "SoftEel-v0",
+            self.n_robots,
+            max_episode_steps=max_episode_steps,
+            num_threads=num_threads,
+            autoreset_mode=AutoresetMode.SAME_STEP,
+            **swim_kwargs,
+        )
+        self.env_id = "SoftEelSegments-v0"
+        self._actions: np.ndarray | None = None
+        self._robots = np.ones(self.n_robots, dtype=np.bool_)
+        self._returns = np.zeros((self.n_robots, k))
+        super().__init__(int(n_envs), proto.agent_observation_space, proto.agent_action_space)
+        if seed is not None:
+            self.seed(seed)
+
+    def reset(self) -> np.ndarray:
+        """Reset every robot (robot ``r`` with the ``r``-th seed set before) and return the observations."""
+        seeds = self._seeds[: self.n_robots] if self._seeds else [None] * self.n_robots
+        self.reset_infos = self.venv.reset_robots(seeds, [None] * self.n_robots)
+        self._reset_seeds()
+        self._reset_options()
+        self._returns[:] = 0.0
+        return self.layout.observe(self.venv.obs).reshape(self.num_envs, -1)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        """Store the actions, (n_envs, 1) or (n_envs,), for :meth:`step_wait`."""
+        self._actions = actions
+
+    def step_wait(self):
+        """Step every robot (resetting those that end); returns SB3's (obs, rewards, dones, infos)."""
+        venv, k = self.venv, self.layout.n_agents
+        if venv.needs_reset:
+            raise RuntimeError("SoftEelSegments-v0 SegmentVecEnv: call reset() before step()")
+        actions = np.asarray(self._actions, dtype=np.float64)
+        if actions.size != self.num_envs:
+            raise ValueError(
+                f"SegmentVecEnv actions have shape {actions.shape}; expected ({self.num_envs}, 1), one per slot"
+            )
+        terminated, truncated = venv.advance(actions.reshape(self.n_robots, k), self._robots)
+        batch = venv.batch
+        energy, ctrl = local_terms(batch.task, batch.sim, ~terminated)
+        rs = batch.task.rs
+        rewards = (rs[:, T.R_RF] + rs[:, T.R_RFAIL])[:, None] + energy + ctrl
+        self._returns += rewards
+        obs = self.layout.observe(venv.obs)
+        done = terminated | truncated
+        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        if done.any():
+            stats = venv.episode_stats(done)
+            for r in np.flatnonzero(done):
+                metrics, failure = venv.episode_metrics(r), venv.envs[r].failure
+                for j in range(k):
+                    infos[r * k + j] = {
+                        "terminal_observation": obs[r, j].copy(),
+                        "TimeLimit.truncated": bool(truncated[r] and not terminated[r]),
+                        "episode": {
+                            "r": float(self._returns[r, j]),
+                            "l": int(stats["l"][r]),
+                            "t": float(stats["t"][r]),
+                        },
+                        "metrics": metrics,
+                        "failure": failure,
+                    }
+                venv.reset_robot(r)
+                self._returns[r] = 0.0
+                obs[r] = self.layout.observe(venv.obs[r])
+        return (
+            obs.reshape(self.num_envs, -1),
+            rewards.reshape(-1).astype(np.float32),
+            np.repeat(done, k),
+            infos,
+        )
+
+    def close(self) -> None:
+        """Close the batched env."""
+        self.venv.close()
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        """Attribute ``attr_name`` of the robot env object of each slot in ``indices``."""
+        k = self.layout.n_agents
+        return [getattr(self.venv.envs[i // k], attr_name) for i in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        """Set attribute ``attr_name`` on the robot env object of each slot in ``indices``."""
+        k = self.layout.n_agents
+        for i in self._get_indices(indices):
+            setattr(self.venv.envs[i // k], attr_name, value)
+
+    def env_method(
+        self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs
+    ) -> list[Any]:
+        """Call ``method_name`` on the robot env object of each slot in ``indices``."""
+        k = self.layout.n_agents
+        return [
+            getattr(self.venv.envs[i // k], method_name)(*method_args, **method_kwargs)
+            for i in self._get_indices(indices)
+        ]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
+        """True for SB3's ``Monitor``: the adapter records episode statistics itself."""
+        from stable_baselines3.common.monitor import Monitor
+
+        return [wrapper_class is Monitor for _ in self._get_indices(indices)]
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        """``None`` per slot: the batched env does not render."""
+        return [None for _ in range(self.num_envs)]
 
 
 def _row(infos: dict[str, Any], i: int) -> dict[str, Any]:

@@ -33,7 +33,8 @@ def enter_loopback_namespace() -> None:
 @pytest.fixture(scope="session")
 def ray_cluster():
     """A real two-node Ray cluster (one CPU each) on 127.0.0.1, shared by the Ray tests."""
-    cluster_utils = pytest.importorskip("ray.cluster_utils")
+    from ray import cluster_utils  # here: Ray takes a second to import; the ray extra is a test need
+
     enter_loopback_namespace()
     cluster = cluster_utils.Cluster(
         initialize_head=True, head_node_args={"num_cpus": 1, "node_ip_address": "127.0.0.1"}

@@ -7,6 +7,7 @@ RLlib pins its own Gymnasium, so these run in the second venv the README's test 
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -69,6 +70,11 @@ def _rllib_missing() -> str | None:
 
 
 RLLIB_MISSING = _rllib_missing()
+if RLLIB_MISSING and os.environ.get("SOFT_SNAKE_REQUIRE_RLLIB"):
+    # the README's RLlib venv sets this: there a missing RLlib is a failure, not a skip
+    raise RuntimeError(
+        f"SOFT_SNAKE_REQUIRE_RLLIB is set but RLlib is not installed as its extra: {RLLIB_MISSING}"
+    )
 
 
 @pytest.fixture()

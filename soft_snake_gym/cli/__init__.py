@@ -22,6 +22,7 @@ from soft_snake_gym.cli import (
     evaluate,
     figures,
     reproduce,
+    robustness,
     sweep,
     train,
     tune,
@@ -42,6 +43,7 @@ COMMANDS: tuple[ModuleType, ...] = (
     benchmark,
     convergence,
     tune,
+    robustness,
 )
 
 

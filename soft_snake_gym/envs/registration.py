@@ -27,6 +27,7 @@ ENV_IDS = {
     "SoftWorm-v0": "soft_snake_gym.envs.inch:InchEnv",
     "SoftEelGoal-v0": "soft_snake_gym.envs.navigate:GoalEnv",
     "SoftEelPath-v0": "soft_snake_gym.envs.navigate:PathEnv",
+    "SoftEelSegments-v0": "soft_snake_gym.multiagent.segments:SegmentsEnv",
 }
 VECTOR_ENTRY_POINTS = {
     "SoftEel-v0": "soft_snake_gym.envs.vector:SwimVectorEnv",
@@ -39,12 +40,13 @@ EPISODE_STEPS = {
     "SoftWorm-v0": MAX_EPISODE_STEPS,
     "SoftEelGoal-v0": 3000,
     "SoftEelPath-v0": 3000,
+    "SoftEelSegments-v0": MAX_EPISODE_STEPS,
 }
 """Steps per episode of each id (``TimeLimit``): 10 s, or 30 s to steer to a target or onto a path."""
 
 
 def register_envs() -> None:
-    """Register ``SoftEel-v0``, ``SoftWorm-v0``, ``SoftEelGoal-v0``, ``SoftEelPath-v0`` unless already registered.
+    """Register every id of :data:`ENV_IDS` unless already registered.
 
     :data:`EPISODE_STEPS` steps each, with their batched vector entry points.
     """
@@ -54,7 +56,7 @@ def register_envs() -> None:
                 id=env_id,
                 entry_point=entry_point,
                 max_episode_steps=EPISODE_STEPS[env_id],
-                vector_entry_point=VECTOR_ENTRY_POINTS[env_id],
+                vector_entry_point=VECTOR_ENTRY_POINTS.get(env_id),
             )
 
 

@@ -51,6 +51,7 @@ DEFAULT_POLICIES = {
     "SoftWorm-v0": ["zoo:ppo", "inching-pid", "inching"],
     "SoftEelGoal-v0": ["zoo:ppo", "los"],
     "SoftEelPath-v0": ["los", "pid"],  # no path-following agent is shipped yet (docs/navigation.md)
+    "SoftEelSegments-v0": ["zoo:ppo", "decentralized", "decentralized:closure=pacemaker", "pid"],
 }
 
 

@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from soft_snake_gym.agents import TrainedPolicy, make_policy
+from soft_snake_gym.agents import TrainedPolicy, for_env, make_policy
 from soft_snake_gym.evaluation import evaluate, make_eval_env, summarize
 from soft_snake_gym.training.config import CURVE_METRICS, TrainConfig
 from soft_snake_gym.training.run import save_checkpoint
@@ -90,6 +90,7 @@ def make_callbacks(
             agent = TrainedPolicy(
                 self.model, vn.obs_rms if vn is not None else None, vn.clip_obs if vn is not None else 10.0
             )
+            agent = for_env(agent, self.env)  # a local policy on a segment team: every agent runs it
             scores = self._score(agent)
             row = {"timesteps": self.num_timesteps, "wall_s": round(time.time() - started, 1)}
             for key in CURVE_METRICS:

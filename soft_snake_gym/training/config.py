@@ -40,6 +40,7 @@ DEFAULT_BASELINES = {
     "SoftWorm-v0": "inching-pid",
     "SoftEelGoal-v0": "los",
     "SoftEelPath-v0": "los",
+    "SoftEelSegments-v0": "decentralized",
 }
 CONFIGS = CONFIG_DIR / "algorithm"
 
@@ -73,6 +74,9 @@ class TrainConfig:
         init_from: start a new run from another agent's weights instead of at random: a model
             zip, a run folder, or ``zoo:<env id>`` (the PPO agent shipped for that id); see
             :func:`soft_snake_gym.training.train.init_from`. ``""``: at random.
+        imitate: a baseline spec the new agent first imitates before PPO trains it
+            (:mod:`soft_snake_gym.training.imitation`); ``none`` (default): start from scratch.
+        imitate_episodes: episodes of the baseline recorded for the imitation.
     """
 
     env_id: str
@@ -92,6 +96,8 @@ class TrainConfig:
     checkpoint_freq: int = 50_000
     baseline: str = "default"
     init_from: str = ""
+    imitate: str = "none"
+    imitate_episodes: int = 16
 
     def __post_init__(self) -> None:
         """Check the values, raising ``ConfigError``."""
@@ -105,11 +111,16 @@ class TrainConfig:
             ("checkpoint_freq", 0),
             ("seed", 0),
             ("eval_seed", 0),
+            ("imitate_episodes", 1),
         ):
             value = plain_number(getattr(self, name), integer=True)
             if value is None or value < lo:
                 raise ConfigError(f"{name} = {getattr(self, name)!r} must be an integer >= {lo}")
             object.__setattr__(self, name, value)
+        if not isinstance(self.imitate, str):
+            raise ConfigError(
+                f"imitate = {self.imitate!r} must be a baseline spec (e.g. decentralized) or none"
+            )
         if self.vec_env not in ("dummy", "subproc", "batched"):
             raise ConfigError(f"vec_env = {self.vec_env!r} must be 'dummy', 'subproc' or 'batched'")
         if not isinstance(self.normalize, bool):

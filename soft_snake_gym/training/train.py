@@ -12,6 +12,7 @@ from soft_snake_gym.config import ConfigError
 from soft_snake_gym.envs.registration import importable_id
 from soft_snake_gym.training.callbacks import make_callbacks
 from soft_snake_gym.training.config import TrainConfig, _algo_class, check_env_id, planned_steps
+from soft_snake_gym.training.imitation import imitate
 from soft_snake_gym.training.run import (
     _check_new_run_dir,
     _checkpoint_walls,
@@ -34,6 +35,18 @@ def make_train_env(cfg: TrainConfig, seed: int):
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
+    if cfg.env_id == "SoftEelSegments-v0":  # every agent a slot: one shared local policy
+        from soft_snake_gym.sb3 import SegmentVecEnv
+
+        if cfg.vec_env != "batched":
+            raise ConfigError(
+                f"vec_env = {cfg.vec_env!r}: SoftEelSegments-v0 trains on the batched segment adapter; "
+                "set vec_env: batched"
+            )
+        try:
+            return SegmentVecEnv(cfg.n_envs, seed=seed, **dict(cfg.env_kwargs))
+        except ValueError as err:
+            raise ConfigError(str(err)) from None
     if cfg.vec_env == "batched":
         from soft_snake_gym.sb3 import SoftVecEnv
 
@@ -210,6 +223,8 @@ def train(
     try:
         stage_start = model.num_timesteps if resume and _is_new_stage(cfg, run_dir) else 0
         callbacks = make_callbacks(cfg, run_dir, started, stage_start, on_eval)  # checks the baseline
+        if cfg.imitate != "none" and not resume:  # a bad spec raises before the folder is written
+            imitate(model, cfg)
         if resume:  # every check passed: now the folder is written
             _record_resume(cfg, run_dir, command)
         else:
