@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from soft_snake_gym.envs import register_envs
@@ -172,9 +173,12 @@ def make_eval_env(
     seed: int | None = 0,
     env_kwargs: dict[str, Any] | None = None,
     render_mode: str | None = None,
+    wrapper: Callable[[gym.Env], gym.Env] | None = None,
 ):
-    """A ``DummyVecEnv`` of ``Monitor``-wrapped envs, as SB3's evaluation expects."""
-    import gymnasium as gym
+    """A ``DummyVecEnv`` of ``Monitor``-wrapped envs, as SB3's evaluation expects.
+
+    ``wrapper``, if given, wraps each env inside its ``Monitor`` (a perturbation, say).
+    """
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -186,7 +190,8 @@ def make_eval_env(
 
     def factory(rank: int):
         def make():
-            env = Monitor(gym.make(env_id, **kwargs))
+            env = gym.make(env_id, **kwargs)
+            env = Monitor(wrapper(env) if wrapper is not None else env)
             env.reset(seed=None if seed is None else seed + rank)
             return env
 
@@ -222,15 +227,11 @@ class EpisodeRecorder:
         dt: control step [s].
         transient: start-up time left out of speed and tracking error [s].
         error_key: ``"curvature_error"`` or ``"length_error"``.
-        on_step: optional ``f(i, info)`` called on every step (for video frames).
     """
 
-    def __init__(
-        self, dt: float, transient: float, error_key: str, on_step: Callable[[int, dict], None] | None = None
-    ) -> None:
+    def __init__(self, dt: float, transient: float, error_key: str) -> None:
         """Start with no episodes recorded (arguments in the class docstring)."""
         self.dt, self.transient, self.error_key = dt, transient, error_key
-        self.on_step = on_step
         self.episodes: list[dict[str, Any]] = []
         self._run: dict[int, _Running] = {}
 
@@ -261,8 +262,6 @@ class EpisodeRecorder:
                 run.error_sum += e
                 run.error_n += 1
         run.last_com = com
-        if self.on_step is not None:
-            self.on_step(i, info)
         if done:
             self.episodes.append(self._finish(run, info))
             self._run[i] = _Running()
@@ -338,37 +337,63 @@ def evaluate(
     if warning:
         warnings.warn(warning, stacklevel=2)
     error_key = "curvature_error" if inner.medium == "water" else "length_error"
-    frames: list[np.ndarray] = []
-    stride = max(1, int(round(1.0 / (VIDEO_FPS * inner.dt))))  # render only the frames kept
-    recording = {"on": video is not None, "step": 0}
-
-    def on_step(i: int, info: dict) -> None:
-        if recording["on"] and i == 0:
-            if "terminal_observation" in info:  # the env has already been reset
-                recording["on"] = False
-                return
-            recording["step"] += 1
-            if recording["step"] % stride == 0:
-                frame = env.envs[0].render()
-                if frame is not None:
-                    frames.append(frame)
-
-    rec = EpisodeRecorder(inner.dt, transient, error_key, on_step if video is not None else None)
+    rec = EpisodeRecorder(inner.dt, transient, error_key)
+    recorder = None
     if video is not None:
-        env.reset()
-        frames.append(env.envs[0].render())
-    evaluate_policy(
-        policy,
-        env,
-        n_eval_episodes=episodes,
-        deterministic=deterministic,
-        callback=rec,
-        return_episode_rewards=True,
-        warn=False,
-    )
-    if video is not None:
-        write_video(frames, video, fps=round(1.0 / (stride * inner.dt)))
+        stride = max(1, int(round(1.0 / (VIDEO_FPS * inner.dt))))  # render only the frames kept
+        recorder = env.envs[0] = _FirstEpisodeFrames(env.envs[0], stride)
+    try:
+        evaluate_policy(
+            policy,
+            env,
+            n_eval_episodes=episodes,
+            deterministic=deterministic,
+            callback=rec,
+            return_episode_rewards=True,
+            warn=False,
+        )
+    finally:
+        if recorder is not None:
+            env.envs[0] = recorder.env
+    if recorder is not None:
+        write_video(recorder.frames, video, fps=round(1.0 / (recorder.stride * inner.dt)))
     return rec.episodes
+
+
+class _FirstEpisodeFrames(gym.Wrapper):
+    """Env 0 of an evaluation, rendering its first episode: the reset state, then every ``stride``-th step.
+
+    It renders inside the episode's own reset and steps, so a video changes nothing of what is
+    evaluated (the seeded reset stays the episode's).
+    """
+
+    def __init__(self, env: Any, stride: int) -> None:
+        super().__init__(env)
+        self.stride = stride
+        self.frames: list[np.ndarray] = []
+        self._step: int | None = None  # steps of the first episode so far; None before it starts
+
+    def reset(self, **kwargs: Any):
+        out = self.env.reset(**kwargs)
+        if self._step is None:
+            self._step = 0
+            self._keep()
+        else:
+            self._step = -1  # the first episode is over
+        return out
+
+    def step(self, action: Any):
+        out = self.env.step(action)
+        if self._step is not None and self._step >= 0:
+            self._step += 1
+            if self._step % self.stride == 0:
+                self._keep()
+        return out
+
+    def _keep(self) -> None:
+        frame = self.env.render()
+        if frame is not None:
+            self.frames.append(frame)
 
 
 def check_video_path(path: str | Path) -> None:

@@ -218,3 +218,19 @@ def test_policy_gait_reads_the_spec_and_the_policy_config():
     assert policy_gait("open-loop")["delta"] is None  # the env resolves 2 pi / (N - 2)
     with pytest.raises(ConfigError, match="unknown key 'alph'"):
         policy_gait("open-loop:alph=1")
+
+
+def test_a_video_does_not_change_the_evaluated_episode(tmp_path):
+    from soft_snake_gym.agents import make_policy
+    from soft_snake_gym.evaluation import evaluate, make_eval_env
+
+    def episode(video):
+        env = make_eval_env(
+            "SoftEelGoal-v0", seed=7, env_kwargs={"max_episode_steps": 60}, render_mode="rgb_array"
+        )
+        return evaluate(make_policy("los", env), env, episodes=1, transient=0.1, video=video)[0]
+
+    path = tmp_path / "goal.gif"
+    with_video, without = episode(path), episode(None)
+    assert with_video == without  # the seeded target and start, as without a video
+    assert path.stat().st_size > 0

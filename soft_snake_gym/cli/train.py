@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
 from pathlib import Path
 
 from soft_snake_gym.cli.common import CLIError, add_backend_arguments, check_backend_arguments
 from soft_snake_gym.config import load_yaml, parse_assignments
+from soft_snake_gym.tables import read_rows
 from soft_snake_gym.training import (
     ALGOS,
     Terminated,
@@ -125,10 +125,9 @@ def run(args: argparse.Namespace) -> int:
         return 143 if isinstance(err, Terminated) else 130
     wall = time.time() - t0
     print(f"done in {wall:.0f} s; final model {final}")
-    curve = run_dir / "learning_curve.csv"
-    if curve.is_file():
-        with open(curve) as fh:
-            last = list(csv.DictReader(fh))[-1]
+    rows = read_rows(run_dir / "learning_curve.csv")
+    if rows:
+        last = rows[-1]
         line = (
             f"last evaluation at {last['timesteps']} steps: return {float(last['return_mean']):.4g}, "
             f"average speed {float(last['average_speed_mean']):.4g} m/s"

@@ -20,7 +20,6 @@ its robot is bitwise the same robot.
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -32,10 +31,11 @@ import numpy as np
 
 from soft_snake_gym import plots
 from soft_snake_gym.agents import make_policy
-from soft_snake_gym.evaluation import evaluate, summarize
+from soft_snake_gym.evaluation import evaluate, make_eval_env, summarize
 from soft_snake_gym.multiagent.segments import SegmentsEnv, node_index
 from soft_snake_gym.params import check_int, check_number
 from soft_snake_gym.policies import PolicyEnvMismatch
+from soft_snake_gym.tables import appending, read_rows
 
 __all__ = [
     "CONTROLLERS",
@@ -158,21 +158,6 @@ class Perturbed(gym.Wrapper):
         return self._lose(obs), reward, terminated, truncated, info
 
 
-def _eval_env(env_id: str, perturbation: Perturbation, seed: int, env_kwargs: dict[str, Any]):
-    """A DummyVecEnv of one Monitor-wrapped, perturbed env, as :func:`evaluation.evaluate` takes it."""
-    from stable_baselines3.common.monitor import Monitor
-    from stable_baselines3.common.vec_env import DummyVecEnv
-
-    def make():
-        env = Monitor(Perturbed(gym.make(env_id, **env_kwargs), perturbation))
-        env.reset(seed=seed)
-        return env
-
-    venv = DummyVecEnv([make])
-    venv.seed(seed)
-    return venv
-
-
 def settings(experiment: str, n_nodes: int, fractions: list[float], lengths: list[int], lost_node: int):
     """The rows of an experiment: (row label, perturbation, N)."""
     if experiment == "failure":
@@ -244,24 +229,17 @@ def run_experiment(
         + [f"{k}_{s}" for k, _, _ in METRICS for s in ("mean", "std")]
         + ["note"]
     )
-    results: list[dict[str, Any]] = []
-    done: dict[tuple[str, str], dict[str, Any]] = {}
-    if path.is_file():  # a finished cell of an earlier (interrupted or partial) run is kept
-        with open(path, newline="") as fh:
-            done = {(r["setting"], r["controller"]): r for r in csv.DictReader(fh)}
-    new = not done
-    with open(path, "a", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=fields)
-        if new:
-            writer.writeheader()
+    done = {(r["setting"], r["controller"]): r for r in read_rows(path)}  # an earlier run's cells
+    with appending(path, fields) as write:
         for label, perturbation, n in rows_spec:
             for c in controllers:
                 if (label, c.label) in done:
-                    results.append(done[(label, c.label)])
                     continue
                 row: dict[str, Any] = {"setting": label, "controller": c.label, "N": n, "note": ""}
                 kw = {**kwargs, "rod": {**kwargs.get("rod", {}), "N": n}}
-                env = _eval_env(c.env_id, perturbation, seed, kw)
+                env = make_eval_env(
+                    c.env_id, seed=seed, env_kwargs=kw, wrapper=lambda e, p=perturbation: Perturbed(e, p)
+                )
                 try:
                     policy = make_policy(c.spec, env)
                 except PolicyEnvMismatch as err:  # e.g. the centralized PPO's input size at N != 10
@@ -273,13 +251,10 @@ def run_experiment(
                 env.close()
                 for key, _, _ in METRICS:
                     row[f"{key}_mean"], row[f"{key}_std"] = summary.get(key, (math.nan, math.nan))
-                writer.writerow(row)
-                fh.flush()
-                results.append(row)
+                write(row)
                 if progress is not None:
                     progress(f"{experiment} {label:>8} {c.label:<20} {row['average_speed_mean']:.4f} m/s")
-    with open(path, newline="") as fh:  # every controller's cells, those of earlier runs too
-        results = list(csv.DictReader(fh))
+    results = read_rows(path)  # every controller's cells, those of earlier runs too
     plot_experiment(experiment, results, out / f"{experiment}.png")
     return results
 

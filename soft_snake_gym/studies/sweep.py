@@ -26,7 +26,6 @@ and the resume do not depend on the backend.
 from __future__ import annotations
 
 import contextlib
-import csv
 import math
 import multiprocessing as mp
 import os
@@ -47,6 +46,7 @@ from soft_snake_gym.distributed import connected, imap_unordered
 from soft_snake_gym.envs import register_envs
 from soft_snake_gym.evaluation import NAV_METRICS, TABLE, evaluate, make_eval_env, metric_columns
 from soft_snake_gym.gaits import max_serpenoid_amplitude
+from soft_snake_gym.tables import appending, read_rows
 
 __all__ = [
     "BACKENDS",
@@ -262,25 +262,20 @@ def _columns(study: Study) -> list[str]:
 
 def read_results(path: str | Path) -> dict[str, dict[str, Any]]:
     """Finished cells of a sweep CSV, by key (a torn last line is ignored)."""
-    path = Path(path)
     out: dict[str, dict[str, Any]] = {}
-    if not path.is_file():
-        return out
-    with path.open(newline="") as f:
-        reader = csv.DictReader(f)
-        for row in reader:
-            if not row.get("key") or row.get("wall_time") in (None, ""):
-                continue
-            parsed: dict[str, Any] = {}
-            for k, v in row.items():
-                if k in ("key", "study", "controller", "failure"):
-                    parsed[k] = v
-                else:
-                    try:
-                        parsed[k] = float(v)
-                    except (TypeError, ValueError):
-                        parsed[k] = math.nan
-            out[row["key"]] = parsed
+    for row in read_rows(path):
+        if not row.get("key") or row.get("wall_time") in (None, ""):
+            continue
+        parsed: dict[str, Any] = {}
+        for k, v in row.items():
+            if k in ("key", "study", "controller", "failure"):
+                parsed[k] = v
+            else:
+                try:
+                    parsed[k] = float(v)
+                except (TypeError, ValueError):
+                    parsed[k] = math.nan
+        out[row["key"]] = parsed
     return out
 
 
@@ -380,21 +375,10 @@ def run_sweep(
     columns = _columns(study)
     workers = max(1, workers or os.cpu_count() or 1) if workers or backend == "local" else None
     t0 = time.perf_counter()
-    new_file = not path.is_file() or path.stat().st_size == 0
     with contextlib.ExitStack() as stack:
         if backend == "ray" and pending:  # before the CSV is touched: Ray missing, a bad address
             stack.enter_context(connected(address, num_cpus=workers if address is None else None))
-        f = stack.enter_context(path.open("a", newline=""))
-        writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
-        if new_file:
-            writer.writeheader()
-            f.flush()
-
-        def write(row: dict[str, Any]) -> None:
-            row = dict(row, key=cell_key(row))
-            writer.writerow({k: row.get(k, "") for k in columns})
-            f.flush()
-            os.fsync(f.fileno())
+        write_row = stack.enter_context(appending(path, columns))
 
         bar = tqdm(
             total=len(cells),
@@ -404,7 +388,7 @@ def run_sweep(
             disable=not progress,
         )
         for row in _run_cells(pending, grid, workers, backend, address):
-            write(row)
+            write_row(dict(row, key=cell_key(row)))
             bar.update()
         bar.close()
     pngs: list[Path] = []

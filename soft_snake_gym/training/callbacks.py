@@ -6,7 +6,6 @@ same seeds (learning_curve.csv, the best model).
 
 from __future__ import annotations
 
-import csv
 import math
 import time
 from collections.abc import Callable
@@ -14,6 +13,7 @@ from pathlib import Path
 
 from soft_snake_gym.agents import TrainedPolicy, for_env, make_policy
 from soft_snake_gym.evaluation import evaluate, make_eval_env, summarize
+from soft_snake_gym.tables import appending, read_rows
 from soft_snake_gym.training.config import CURVE_METRICS, TrainConfig
 from soft_snake_gym.training.run import save_checkpoint
 
@@ -68,12 +68,12 @@ def make_callbacks(
             spec = cfg.baseline_spec  # made now, so a bad spec fails before any training
             self.baseline_policy = make_policy(spec, self.env) if spec is not None and cfg.eval_freq else None
             self.csv = run_dir / "learning_curve.csv"
-            if self.csv.is_file():  # resumed: keep the best so far and the baseline line
-                with open(self.csv) as fh:
-                    rows = list(csv.DictReader(fh))
-                stage = [float(r["return_mean"]) for r in rows if int(r["timesteps"]) > stage_start]
-                if stage:
-                    self.best = max(stage)
+            # resumed: keep the best so far (a torn last row of a killed run is not read)
+            stage = [
+                float(r["return_mean"]) for r in read_rows(self.csv) if int(r["timesteps"]) > stage_start
+            ]
+            if stage:
+                self.best = max(stage)
 
         def _score(self, policy) -> dict[str, tuple[float, float]]:
             self.env.seed(cfg.eval_seed)
@@ -99,12 +99,8 @@ def make_callbacks(
                 if self.baseline is not None:
                     row[f"baseline_{key}"] = self.baseline.get(key, (math.nan,))[0]
                     self.logger.record(f"eval/baseline_{key}", row[f"baseline_{key}"])
-            new = not self.csv.is_file()
-            with open(self.csv, "a", newline="") as fh:
-                writer = csv.DictWriter(fh, fieldnames=list(row))
-                if new:
-                    writer.writeheader()
-                writer.writerow(row)
+            with appending(self.csv, list(row)) as write:
+                write(row)
             if row["return_mean"] > self.best:
                 self.best = row["return_mean"]
                 self.model.save(run_dir / "best_model.zip")

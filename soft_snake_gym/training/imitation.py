@@ -122,7 +122,7 @@ def imitate(model: Any, cfg: TrainConfig, epochs: int = 30, batch_size: int = 10
             action_loss = torch.mean((mean - y[idx]) ** 2)
             value_loss = torch.mean((value - v[idx]) ** 2)
             optimizer.zero_grad()
-            (action_loss + 0.01 * value_loss).backward()
+            (action_loss + value_loss).backward()  # separate networks: the sum trains each fully
             optimizer.step()
             losses = {"action_mse": action_loss.item(), "value_mse": value_loss.item()}
     return losses

@@ -20,7 +20,6 @@ A run folder holds everything needed to reproduce or continue a run::
 from __future__ import annotations
 
 import contextlib
-import csv
 import json
 import os
 import platform
@@ -43,6 +42,7 @@ from soft_snake_gym import plots
 from soft_snake_gym.agents import latest_checkpoint
 from soft_snake_gym.config import ConfigError, load_yaml
 from soft_snake_gym.evaluation import metric_columns
+from soft_snake_gym.tables import read_rows
 from soft_snake_gym.training.config import CURVE_METRICS, TrainConfig, load_train_config
 
 __all__ = [
@@ -293,8 +293,7 @@ def plot_learning_curve(run_dir: str | Path, out: str | Path | None = None) -> P
         ConfigError: the CSV has no evaluations yet.
     """
     run_dir = Path(run_dir)
-    with open(run_dir / "learning_curve.csv") as fh:
-        rows = list(csv.DictReader(fh))
+    rows = read_rows(run_dir / "learning_curve.csv")
     if not rows:
         raise ConfigError(f"{run_dir / 'learning_curve.csv'} has no evaluations yet")
     cfg = load_train_config(next(iter(load_yaml(run_dir / "config.yaml"))), path=run_dir / "config.yaml")
