@@ -22,32 +22,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support import TINY_TRAINING, cli
 
 pytestmark = pytest.mark.ray
 
 SWEEP = ["swim-gait", "--n-alpha", "2", "--n-omega", "2", "--cycles", "1", "--no-progress"]
-TINY = [
-    "n_envs=2",
-    "n_steps=64",
-    "batch_size=64",
-    "n_epochs=2",
-    "eval_freq=128",
-    "checkpoint_freq=128",
-    "eval_episodes=1",
-    "env_kwargs.max_episode_steps=100",
-]
-TRAIN = ["train", "SoftEel-v0", "--n-timesteps", "256", "--no-progress", "--hyperparams", *TINY]
+TRAIN = ["train", "SoftEel-v0", "--n-timesteps", "256", "--no-progress", "--hyperparams", *TINY_TRAINING]
 
 
 @pytest.fixture(scope="module")
 def cluster(ray_cluster):
     return ray_cluster
-
-
-def cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "soft_snake_gym.cli", *args], capture_output=True, text=True, timeout=timeout
-    )
 
 
 def rows(path: Path) -> dict[str, dict[str, str]]:

@@ -12,26 +12,10 @@ from pathlib import Path
 
 import pytest
 import yaml
+from support import TINY_TRAINING, cli
 
 from soft_snake_gym.cli import main
 from soft_snake_gym.training import TrainConfig, load_train_config
-
-TINY = [
-    "n_envs=2",
-    "n_steps=64",
-    "batch_size=64",
-    "n_epochs=2",
-    "eval_freq=128",
-    "checkpoint_freq=128",
-    "eval_episodes=1",
-    "env_kwargs.max_episode_steps=100",
-]
-
-
-def cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "soft_snake_gym.cli", *args], capture_output=True, text=True, timeout=timeout
-    )
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +30,7 @@ def trained_run(tmp_path_factory) -> Path:
         str(run),
         "--no-progress",
         "--hyperparams",
-        *TINY,
+        *TINY_TRAINING,
     )
     assert out.returncode == 0, out.stderr
     assert "last evaluation at 256 steps" in out.stdout and "baseline pid" in out.stdout
@@ -136,7 +120,7 @@ def test_ctrl_c_keeps_a_checkpoint_that_resumes(tmp_path):
             str(run),
             "--no-progress",
             "--hyperparams",
-            *TINY,
+            *TINY_TRAINING,
             "eval_freq=0",
         ],
         stdout=subprocess.PIPE,
@@ -247,7 +231,7 @@ def test_a_folder_without_checkpoint_is_reused_and_steps_are_exact(tmp_path, cap
     run.mkdir()
     (run / "config.yaml").write_text("SoftEel-v0: {}\n")  # what a run that died early leaves
     (run / "learning_curve.csv").write_text("timesteps,wall_s,return_mean\n999,1.0,5.0\n")
-    hyper = [h for h in TINY if not h.startswith(("eval_freq", "checkpoint_freq"))]
+    hyper = [h for h in TINY_TRAINING if not h.startswith(("eval_freq", "checkpoint_freq"))]
     # n_envs 2 x n_steps 64: a rollout is 128 steps; 200 rounds up to 256
     code = main(
         [
@@ -328,7 +312,7 @@ def test_sigterm_saves_a_checkpoint_and_prints_the_resume_command(tmp_path):
             str(run),
             "--no-progress",
             "--hyperparams",
-            *TINY,
+            *TINY_TRAINING,
             "eval_freq=0",
             "checkpoint_freq=100000",
         ],

@@ -1,0 +1,25 @@
+"""What several test modules share that is not a fixture: a tiny training run, the CLI in a subprocess."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+#: ``--hyperparams`` of a training run scaled down to seconds (two envs, one short evaluation).
+TINY_TRAINING = [
+    "n_envs=2",
+    "n_steps=64",
+    "batch_size=64",
+    "n_epochs=2",
+    "eval_freq=128",
+    "checkpoint_freq=128",
+    "eval_episodes=1",
+    "env_kwargs.max_episode_steps=100",
+]
+
+
+def cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    """``soft-snake ARGS`` in a subprocess, its output captured."""
+    return subprocess.run(
+        [sys.executable, "-m", "soft_snake_gym.cli", *args], capture_output=True, text=True, timeout=timeout
+    )
