@@ -483,7 +483,10 @@ def write_video(frames: list[np.ndarray], path: str | Path, fps: int = 50, strid
             f"writing {path.name} needs imageio with ffmpeg (pip install 'soft-snake-gym[video]'); "
             "or give a .gif path"
         ) from err
-    imageio.mimsave(path, [np.asarray(f, dtype=np.uint8) for f in frames], fps=fps)
+    # H.264 wants sides divisible by 16: pad with the edge pixels (imageio would resize, and warn)
+    frames = [np.asarray(f, dtype=np.uint8) for f in frames]
+    frames = [np.pad(f, ((0, -f.shape[0] % 16), (0, -f.shape[1] % 16), (0, 0)), mode="edge") for f in frames]
+    imageio.mimsave(path, frames, fps=fps)
     return path
 
 
