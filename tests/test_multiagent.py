@@ -228,6 +228,7 @@ def test_robustness_study_writes_tables_and_figures_and_a_failure_slows_the_eel(
 @pytest.mark.slow
 def test_shared_policy_imitates_trains_and_runs_at_other_body_lengths(tmp_path):
     import csv
+    import pickle
 
     from soft_snake_gym.agents import make_policy
     from soft_snake_gym.evaluation import evaluate, make_eval_env, summarize
@@ -250,6 +251,9 @@ def test_shared_policy_imitates_trains_and_runs_at_other_body_lengths(tmp_path):
     }
     run = tmp_path / "run"
     train(load_train_config("SoftEelSegments-v0", overrides=overrides), run, progress=False)
+    with open(run / "vecnormalize.pkl", "rb") as fh:  # the teacher's statistics, not moved by PPO's rollouts
+        stats = pickle.load(fh)
+    assert not stats.training and stats.obs_rms.count == 3 * 400 * 8  # episodes x steps x agents
     row = list(csv.DictReader(open(run / "learning_curve.csv")))[0]  # at the first step: imitation only
     # the imitated shared policy swims like the decentralized PID it copied
     assert float(row["baseline_average_speed"]) > 0.05
