@@ -38,10 +38,9 @@ STAGES = {
         ["--n-timesteps", "1900000", "--hyperparams", "env_kwargs.integrator.substeps=4"],
         ["--n-timesteps", "2150000", "--hyperparams", "env_kwargs.integrator.substeps=16"],
     ],
-    # the goal task starts from the shipped eel (init_from in ppo.yml) and learns to steer; the
-    # shipped agent is the evaluation at 100k steps (docs/navigation.md: the shared machine allowed
-    # no more). No path-following agent is shipped yet.
-    "SoftEelGoal-v0": [["--n-timesteps", "100000"]],
+    # the goal task: a copy of ILOS, then PPO (ppo.yml; docs/navigation.md)
+    "SoftEelGoal-v0": [[]],
+    "SoftEelPath-v0": [[]],
     # the shared local policy: imitation of the decentralized PID, then PPO, which stopped the eel
     # by the first evaluation at 200k agent-steps; the best model is the imitation (docs/decentralized.md)
     "SoftEelSegments-v0": [
