@@ -1,7 +1,7 @@
 """Train the agents shipped in soft_snake_gym/zoo and write the figures of docs/training.md.
 
-Runs the exact commands recorded in the run folders (the eel with a two-stage energy
-curriculum, the worm fine-tuned with finer integration steps), copies each run's best model (by evaluation return on
+Runs the exact commands recorded in the run folders (the eel and the navigation agents from a
+copy of a baseline, the worm fine-tuned with finer integration steps), copies each run's best model (by evaluation return on
 its own evaluation seeds, in its last stage) with its VecNormalize statistics and config into
 the package, plots the learning curves, and compares the shipped
 agents with the baselines on 10 seeds.
@@ -27,9 +27,18 @@ DOCS = ROOT / "docs" / "img"
 #: env id -> list of soft-snake train argument lists (later ones resume the run)
 STAGES = {
     "SoftEel-v0": [
-        # learn to swim with no price on energy, then price it
-        ["--n-timesteps", "400000", "--hyperparams", "env_kwargs.energy_cost_weight=0.0"],
-        ["--n-timesteps", "2200000", "--hyperparams", "env_kwargs.energy_cost_weight=0.002"],
+        # a copy of the PID, then gentle PPO at an energy price of 0.005 per W (docs/training.md)
+        [
+            "--n-timesteps",
+            "600000",
+            "--hyperparams",
+            "imitate=pid",
+            "imitate_episodes=16",
+            "learning_rate=5e-5",
+            "policy_kwargs.log_std_init=-2.5",
+            "clip_range=0.1",
+            "env_kwargs.energy_cost_weight=0.005",
+        ],
     ],
     # the worm's chattering gait lived partly off the step until fine-tuned with 4, then 16
     # internal steps per control step (docs/training.md)

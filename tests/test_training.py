@@ -186,16 +186,17 @@ def test_hyperparameter_file_is_plain_yaml_keyed_by_env_id():
 def test_shipped_agents_beat_their_baselines(env_id, baseline):
     """The agents in soft_snake_gym/zoo do what docs/training.md says, on a seed they were not selected on.
 
-    The eel swims faster than the PID (at a higher cost of transport: pricing energy so that it also
-    beats the PID's is still open), the worm goes further than the closed-loop peristaltic pulse.
+    The eel swims faster than the PID at a lower cost of transport (issue 9's item 7), the worm
+    goes further than the closed-loop peristaltic pulse.
     """
     from soft_snake_gym.studies.compare import compare
 
     res = compare(env_id, ["zoo:ppo", baseline], episodes=1, seed=42)
     agent, base = res["zoo:ppo"], res[baseline]
-    assert agent["distance"][0] > 1.1 * base["distance"][0]
-    if env_id == "SoftEel-v0":
+    assert agent["distance"][0] > 1.05 * base["distance"][0]
+    if env_id == "SoftEel-v0":  # measured on seeds 0..9: 0.145 against 0.126 m/s, 1.19 against 1.26
         assert agent["average_speed"][0] > 1.1 * base["average_speed"][0]
+        assert agent["cost_of_transport"][0] < base["cost_of_transport"][0]
 
 
 # --- issue 15: nothing written before every check passed, exact step counts, SIGTERM ------------
