@@ -75,7 +75,8 @@ class TrainConfig:
             zip, a run folder, or ``zoo:<env id>`` (the PPO agent shipped for that id); see
             :func:`soft_snake_gym.training.train.init_from`. ``""``: at random.
         imitate: a baseline spec the new agent first imitates before PPO trains it
-            (:mod:`soft_snake_gym.training.imitation`); ``none`` (default): start from scratch.
+            (:mod:`soft_snake_gym.training.imitation`; the ``VecNormalize`` statistics are then
+            the baseline's and stay fixed); ``none`` (default): start from scratch.
         imitate_episodes: episodes of the baseline recorded for the imitation.
     """
 
