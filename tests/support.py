@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 
@@ -23,3 +24,12 @@ def cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "-m", "soft_snake_gym.cli", *args], capture_output=True, text=True, timeout=timeout
     )
+
+
+def ctrl_c_reaches_it() -> None:
+    """``preexec_fn`` of a subprocess a test will interrupt: SIGINT at its default, as from a terminal.
+
+    A job started in the background (``cmd &`` in a script) ignores SIGINT and its children
+    inherit that; Python then never raises KeyboardInterrupt, and the run would finish instead.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

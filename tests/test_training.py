@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from support import TINY_TRAINING, cli
+from support import TINY_TRAINING, cli, ctrl_c_reaches_it
 
 from soft_snake_gym.cli import main
 from soft_snake_gym.training import TrainConfig, load_train_config
@@ -126,6 +126,7 @@ def test_ctrl_c_keeps_a_checkpoint_that_resumes(tmp_path):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=ctrl_c_reaches_it,
     )
     deadline = time.time() + 240
     while not list((run / "checkpoints").glob("model_*_steps.zip")) and time.time() < deadline:

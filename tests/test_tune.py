@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+from support import ctrl_c_reaches_it
 
 from soft_snake_gym.cli import main
 from soft_snake_gym.config import ConfigError, load_yaml
@@ -108,6 +109,7 @@ def test_three_trials_resume_after_ctrl_c_and_write_a_yaml_that_train_takes(
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=ctrl_c_reaches_it,
     )
     deadline = time.time() + 300
     while proc.poll() is None and time.time() < deadline:
