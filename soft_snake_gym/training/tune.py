@@ -37,6 +37,7 @@ import yaml
 
 from soft_snake_gym.config import ConfigError
 from soft_snake_gym.distributed import RAY_INSTALL, RayNotInstalled
+from soft_snake_gym.tables import read_rows
 from soft_snake_gym.training.config import CURVE_METRICS, TrainConfig, check_env_id, load_train_config
 from soft_snake_gym.training.run import latest_checkpoint
 from soft_snake_gym.training.train import train
@@ -339,11 +340,16 @@ def tune_ppo(settings: TuneSettings, out_dir: str | Path, verbose: int = 1) -> T
     ended = sum(t.status in ("TERMINATED", "ERROR") for t in state)
     if ended < settings.trials:
         raise TuneInterrupted(f"{ended} of {settings.trials} trials ended")
-    trials = [
-        ({k: r.config[k] for k in settings.keys}, float(r.metrics[metric]), int(r.metrics["timesteps"]))
-        for r in grid
-        if r.metrics and metric in r.metrics and math.isfinite(r.metrics[metric])
-    ]
+    # each trial scored by the last row of its own learning curve: a report that Ctrl-C cut off
+    # is lost to Tune's records (the trial then resumes as finished), not to the trial's CSV
+    trials = []
+    for r in grid:
+        rows = read_rows(Path(r.path) / "run" / "learning_curve.csv")
+        if rows and math.isfinite(float(rows[-1][metric])):
+            last = rows[-1]
+            trials.append(
+                ({k: r.config[k] for k in settings.keys}, float(last[metric]), int(last["timesteps"]))
+            )
     if not trials:
         raise ConfigError(
             f"no trial reported a score ({grid.num_errors} failed); see the trials in {out_dir}"
