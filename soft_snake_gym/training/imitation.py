@@ -7,7 +7,7 @@ actions so that the data covers states off the teacher's own path (the recorded 
 the teacher's noiseless actions); sets the ``VecNormalize`` observation and return statistics
 from that data and keeps them fixed for the rest of the run (statistics updated from PPO's noisy
 rollouts drifted and, with them, the copied behaviour: the segment eel stopped within 200k
-agent-steps even at a zero learning rate); and fits the policy's mean action to the teacher's
+agent-steps even at a learning rate of 1e-12); and fits the policy's mean action to the teacher's
 (mean squared error) and the value function to the discounted normalized returns. Nothing of
 the teacher is kept: PPO then trains the network as any other. On ``SoftEelSegments-v0`` each agent's observation and
 action is one sample, so the shared local policy learns what every node's controller does.
@@ -103,7 +103,7 @@ def imitate(model: Any, cfg: TrainConfig, epochs: int = 30, batch_size: int = 10
         vn.ret_rms.count = float(len(data["forward"]))
         # and they stay: the copied controller is a feedback law on the normalized observation, and
         # the on-policy data with exploration noise moves the statistics, the moved statistics move
-        # the behaviour, and so on until the eel stops (at a zero learning rate, too)
+        # the behaviour, and so on until the eel stops (at a learning rate of 1e-12, too)
         vn.training = False
         obs = np.clip(
             (obs - vn.obs_rms.mean) / np.sqrt(vn.obs_rms.var + vn.epsilon), -vn.clip_obs, vn.clip_obs
