@@ -463,41 +463,33 @@ class SoftVectorEnv(VectorEnv):
         return infos
 
 
-class SwimVectorEnv(SoftVectorEnv):
+class _OneIdVectorEnv(SoftVectorEnv):
+    """A :class:`SoftVectorEnv` of the class's ``env_id``, called as ``gym.make_vec`` calls an entry point."""
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        """Build ``num_envs`` robots of ``env_id`` (keywords as for :class:`SoftVectorEnv`)."""
+        super().__init__(self.env_id, num_envs, **kwargs)
+
+
+class SwimVectorEnv(_OneIdVectorEnv):
     """:class:`SoftVectorEnv` of ``SoftEel-v0`` (its ``vector_entry_point``)."""
 
     env_id = "SoftEel-v0"
 
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        """Build ``num_envs`` SoftEel-v0 robots (keywords as for :class:`SoftVectorEnv`)."""
-        super().__init__("SoftEel-v0", num_envs, **kwargs)
 
-
-class InchVectorEnv(SoftVectorEnv):
+class InchVectorEnv(_OneIdVectorEnv):
     """:class:`SoftVectorEnv` of ``SoftWorm-v0`` (its ``vector_entry_point``)."""
 
     env_id = "SoftWorm-v0"
 
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        """Build ``num_envs`` SoftWorm-v0 robots (keywords as for :class:`SoftVectorEnv`)."""
-        super().__init__("SoftWorm-v0", num_envs, **kwargs)
 
-
-class GoalVectorEnv(SoftVectorEnv):
+class GoalVectorEnv(_OneIdVectorEnv):
     """:class:`SoftVectorEnv` of ``SoftEelGoal-v0`` (its ``vector_entry_point``)."""
 
     env_id = "SoftEelGoal-v0"
 
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        """Build ``num_envs`` SoftEelGoal-v0 robots (keywords as for :class:`SoftVectorEnv`)."""
-        super().__init__("SoftEelGoal-v0", num_envs, **kwargs)
 
-
-class PathVectorEnv(SoftVectorEnv):
+class PathVectorEnv(_OneIdVectorEnv):
     """:class:`SoftVectorEnv` of ``SoftEelPath-v0`` (its ``vector_entry_point``)."""
 
     env_id = "SoftEelPath-v0"
-
-    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
-        """Build ``num_envs`` SoftEelPath-v0 robots (keywords as for :class:`SoftVectorEnv`)."""
-        super().__init__("SoftEelPath-v0", num_envs, **kwargs)
