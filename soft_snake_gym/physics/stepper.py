@@ -207,6 +207,22 @@ def _be_residual(s, dt, medium, jac):
 
 
 @njit(cache=True, error_model="numpy")
+def _stick_slow_nodes(v, ibuf, prm, n):
+    """Stick every sliding node slower than ``V_tol`` that may still change; True if any did."""
+    state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
+    stuck_any = False
+    for i in range(n // 2):
+        if (
+            state[i] == SLIDING
+            and switches[i] < MAX_SWITCHES
+            and classify_contact(v, state, i, prm[P_VTOL], False)
+        ):
+            switches[i] += 1
+            stuck_any = True
+    return stuck_any
+
+
+@njit(cache=True, error_model="numpy")
 def _update_contacts(v, buf, ibuf, prm, dt, n):
     """Make stick-slip consistent with the end of a converged step (docs/model.md §5).
 
@@ -219,19 +235,10 @@ def _update_contacts(v, buf, ibuf, prm, dt, n):
     released too eagerly ends slow and sticks again in the next pass. Each node changes at
     most ``MAX_SWITCHES`` times per step, so the passes end.
     """
+    if _stick_slow_nodes(v, ibuf, prm, n):
+        return True
     F, m, v0 = buf[B_F], buf[B_M], buf[B_V0]
     state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
-    stuck_any = False
-    for i in range(n // 2):
-        if (
-            state[i] == SLIDING
-            and switches[i] < MAX_SWITCHES
-            and classify_contact(v, state, i, prm[P_VTOL], False)
-        ):
-            switches[i] += 1
-            stuck_any = True
-    if stuck_any:
-        return True
     released = False
     for i in range(n // 2):
         if state[i] != STUCK or switches[i] >= MAX_SWITCHES:
@@ -241,13 +248,19 @@ def _update_contacts(v, buf, ibuf, prm, dt, n):
         f = math.hypot(fx, fy)
         if f <= prm[P_MUS] * m[2 * i] * prm[P_G]:
             continue
-        state[i] = SLIDING
+        _release(v, state, i, -fx, -fy, prm[P_VTOL])
         switches[i] += 1
         released = True
-        # first guess: just above the sticking speed, along the push (Newton finds the rest)
-        v[2 * i] = -2.0 * prm[P_VTOL] * fx / f
-        v[2 * i + 1] = -2.0 * prm[P_VTOL] * fy / f
     return released
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _release(v, state, i, px, py, vtol):
+    """Let node i slide, with a first guess just above the sticking speed along the push (px, py)."""
+    state[i] = SLIDING
+    p = math.hypot(px, py)
+    v[2 * i] = 2.0 * vtol * px / p
+    v[2 * i + 1] = 2.0 * vtol * py / p
 
 
 @njit(cache=True, error_model="numpy")
@@ -264,15 +277,24 @@ def _be_substep(s, dt, medium):
     tol = prm[P_TOL]
     maxit = int(prm[P_MAXIT])
     if medium == MEDIUM_GROUND:
-        # first guess of the contacts from the start of the step: slow nodes stick, the rest
-        # slide; _update_contacts then makes them consistent with the end of the step
+        # first guess of the contacts: slow nodes stick, the rest slide, and a stuck node whose
+        # holding force at the start of the step (the rest shape already moved) exceeds
+        # mu_s F_N slides, as _update_contacts would release it after a whole contact pass
+        # (halves the Newton iterations under random actions); _update_contacts then makes
+        # the contacts consistent with the end of the step
         state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
+        F, m, fext = buf[B_F], buf[B_M], buf[B_FEXT]
         for i in range(n):
             q0[i] = q[i]
             v0[i] = v[i]
+            F[i] = fext[i]
+        assemble(q, v, s.kbar, s.lbar, prm, F, J, 0.0, 0.0, False, False)
         for i in range(n // 2):
             switches[i] = 0
-            classify_contact(v, state, i, prm[P_VTOL], False)
+            r0, r1 = 2 * i, 2 * i + 1
+            if classify_contact(v, state, i, prm[P_VTOL], False):
+                if math.hypot(F[r0], F[r1]) > prm[P_MUS] * m[r0] * prm[P_G]:
+                    _release(v, state, i, F[r0], F[r1], prm[P_VTOL])
     else:
         # predictor: extrapolate the velocity from the last step (v0 still holds its start;
         # set_state makes it the current velocity, so a fresh state starts with v)
@@ -337,6 +359,12 @@ def _be_substep(s, dt, medium):
         norm2, rmax, p_fluid, p_fric = trial
         if fused:
             factored = False  # J was overwritten by the full step's Jacobian
+            if rmax > tol and _stick_slow_nodes(v, ibuf, prm, n):
+                # a sliding node that an iterate brings below V_tol would stick at the end of
+                # the pass: stick it now instead of converging it into friction's smoothing
+                norm2, rmax, p_fluid, p_fric = _be_residual(s, dt, medium, True)
+                pass_it = 0
+                continue
         if (
             rmax > tol
             and pass_it < maxit
