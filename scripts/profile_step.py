@@ -18,13 +18,14 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from count_instructions import _loop_copy, _loop_factor  # scripts/ is on the path of a script
 from numba import njit
 
 import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.envs import observe
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-from soft_snake_gym.physics import banded, forces, layout, stepper
+from soft_snake_gym.physics import forces, layout, stepper
 from soft_snake_gym.physics.layout import SimArrays
 
 
@@ -34,22 +35,6 @@ def _loop_residual(k, sa, jac):
     for _ in range(k):
         s += stepper._be_residual(sa, 0.01, layout.MEDIUM_WATER, jac)[0]
     return s
-
-
-@njit
-def _loop_lu(k, J, Jw, piv, b, bw):
-    for _ in range(k):
-        Jw[:, :] = J
-        bw[:] = b
-        banded.band_lu(Jw, piv, Jw.shape[0])
-        banded.band_solve(Jw, piv, Jw.shape[0], bw)
-
-
-@njit
-def _loop_copy(k, J, Jw, b, bw):
-    for _ in range(k):
-        Jw[:, :] = J
-        bw[:] = b
 
 
 @njit
@@ -133,7 +118,7 @@ def main() -> None:
             _loop_residual, SimArrays(*(a.copy() for a in sa)), True
         ),
         "residual only (line-search trial)": _us(_loop_residual, SimArrays(*(a.copy() for a in sa)), False),
-        "banded LU + solve (2N = 20, KL = KU = 5)": _us(_loop_lu, J, Jw, piv, b, bw)
+        "banded factor + solve (2N = 20, KL = KU = 5)": _us(_loop_factor, J, Jw, piv, b, bw)
         - _us(_loop_copy, J, Jw, b, bw),
         "state check + actuator power": _us(
             _loop_check, q, v, kbar, lbar, u.task.uk, u.task.ul, prm, buf.copy(), ibuf.copy()

@@ -105,29 +105,30 @@ def test_evaluate_loads_the_run_and_resume_continues_it(trained_run):
     assert steps[-1] >= 448 and steps == sorted(steps)
 
 
-def test_ctrl_c_keeps_a_checkpoint_that_resumes(tmp_path):
-    run = tmp_path / "interrupted"
-    proc = subprocess.Popen(
+def _start_long_training(run, *hyperparams: str, preexec_fn=None) -> subprocess.Popen:
+    """``soft-snake train`` of 100k tiny steps into ``run`` in a child process, to be interrupted."""
+    command = ["train", "SoftEel-v0", "--n-timesteps", "100000", "--run-dir", str(run), "--no-progress"]
+    return subprocess.Popen(
         [
             sys.executable,
             "-m",
             "soft_snake_gym.cli",
-            "train",
-            "SoftEel-v0",
-            "--n-timesteps",
-            "100000",
-            "--run-dir",
-            str(run),
-            "--no-progress",
+            *command,
             "--hyperparams",
             *TINY_TRAINING,
             "eval_freq=0",
+            *hyperparams,
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        preexec_fn=ctrl_c_reaches_it,
+        preexec_fn=preexec_fn,
     )
+
+
+def test_ctrl_c_keeps_a_checkpoint_that_resumes(tmp_path):
+    run = tmp_path / "interrupted"
+    proc = _start_long_training(run, preexec_fn=ctrl_c_reaches_it)
     deadline = time.time() + 240
     while not list((run / "checkpoints").glob("model_*_steps.zip")) and time.time() < deadline:
         time.sleep(0.5)
@@ -301,27 +302,7 @@ def test_git_commit_says_when_there_is_no_checkout(tmp_path):
 
 def test_sigterm_saves_a_checkpoint_and_prints_the_resume_command(tmp_path):
     run = tmp_path / "terminated"
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "soft_snake_gym.cli",
-            "train",
-            "SoftEel-v0",
-            "--n-timesteps",
-            "100000",
-            "--run-dir",
-            str(run),
-            "--no-progress",
-            "--hyperparams",
-            *TINY_TRAINING,
-            "eval_freq=0",
-            "checkpoint_freq=100000",
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    proc = _start_long_training(run, "checkpoint_freq=100000")
     try:
         deadline = time.time() + 240  # training has started once progress.csv has a row
         while time.time() < deadline and proc.poll() is None:
