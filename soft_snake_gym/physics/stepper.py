@@ -283,17 +283,21 @@ def _be_substep(s, dt, medium):
         # (halves the Newton iterations under random actions); _update_contacts then makes
         # the contacts consistent with the end of the step
         state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
-        F, m, fext = buf[B_F], buf[B_M], buf[B_FEXT]
         for i in range(n):
             q0[i] = q[i]
             v0[i] = v[i]
-            F[i] = fext[i]
-        assemble(q, v, s.kbar, s.lbar, prm, F, J, 0.0, 0.0, False, False)
+        stuck_any = False
         for i in range(n // 2):
             switches[i] = 0
-            r0, r1 = 2 * i, 2 * i + 1
-            if classify_contact(v, state, i, prm[P_VTOL], False):
-                if math.hypot(F[r0], F[r1]) > prm[P_MUS] * m[r0] * prm[P_G]:
+            stuck_any |= classify_contact(v, state, i, prm[P_VTOL], False)
+        if stuck_any:  # the start-of-step forces, for the stuck nodes only
+            F, m, fext = buf[B_F], buf[B_M], buf[B_FEXT]
+            for i in range(n):
+                F[i] = fext[i]
+            assemble(q, v, s.kbar, s.lbar, prm, F, J, 0.0, 0.0, False, False)
+            for i in range(n // 2):
+                r0, r1 = 2 * i, 2 * i + 1
+                if state[i] == STUCK and math.hypot(F[r0], F[r1]) > prm[P_MUS] * m[r0] * prm[P_G]:
                     _release(v, state, i, F[r0], F[r1], prm[P_VTOL])
     else:
         # predictor: extrapolate the velocity from the last step (v0 still holds its start;
