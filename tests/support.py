@@ -19,17 +19,25 @@ TINY_TRAINING = [
 ]
 
 
+CLI = [sys.executable, "-m", "soft_snake_gym.cli"]
+
+
 def cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
     """``soft-snake ARGS`` in a subprocess, its output captured."""
-    return subprocess.run(
-        [sys.executable, "-m", "soft_snake_gym.cli", *args], capture_output=True, text=True, timeout=timeout
-    )
+    return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=timeout)
 
 
-def ctrl_c_reaches_it() -> None:
-    """``preexec_fn`` of a subprocess a test will interrupt: SIGINT at its default, as from a terminal.
+def cli_in_background(*args: str) -> subprocess.Popen:
+    """``soft-snake ARGS`` started in a subprocess that the test will interrupt, its output piped.
 
-    A job started in the background (``cmd &`` in a script) ignores SIGINT and its children
-    inherit that; Python then never raises KeyboardInterrupt, and the run would finish instead.
+    SIGINT is at its default in the child, as from a terminal: a job started in the background
+    (``cmd &`` in a script) ignores SIGINT and its children inherit that; Python then never
+    raises KeyboardInterrupt, and a run meant to be stopped by Ctrl-C would finish instead.
     """
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    return subprocess.Popen(
+        [*CLI, *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
+
+from support import cli
 
 from soft_snake_gym.benchmark import format_report, run_benchmark
 from soft_snake_gym.cli import main
@@ -105,12 +106,7 @@ def test_ppo_timing_runs_from_the_command_line_with_subprocess_workers(tmp_path)
     # re-import in SubprocVecEnv's workers: they must make the ids all the same
     out = tmp_path / "bench.json"
     args = ["--seconds", "0.05", "--repeats", "1", "--robots", "2", "--nodes", "--ppo-timesteps", "512"]
-    proc = subprocess.run(
-        [sys.executable, "-m", "soft_snake_gym.cli", "benchmark", *args, "--json", str(out), "--quiet"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    proc = cli("benchmark", *args, "--json", str(out), "--quiet")
     assert proc.returncode == 0, proc.stderr
     ppo = {r["kind"]: r for r in json.loads(out.read_text())["ppo"]}
     assert set(ppo) == {"batched", "subproc"}

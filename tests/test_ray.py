@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support import TINY_TRAINING, cli
+from support import TINY_TRAINING, cli, cli_in_background
 
 pytestmark = pytest.mark.ray
 
@@ -135,12 +135,8 @@ def cmdline(pid: int) -> str:
 
 
 def test_a_killed_worker_is_retried_and_its_cell_written_once(cluster, local_sweep, tmp_path):
-    sweep = subprocess.Popen(
-        [sys.executable, "-m", "soft_snake_gym.cli", "sweep", *SWEEP, "--out", str(tmp_path)]
-        + ["--backend", "ray", "--address", cluster.address],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    sweep = cli_in_background(
+        "sweep", *SWEEP, "--out", str(tmp_path), "--backend", "ray", "--address", cluster.address
     )
     killed = None
     deadline = time.time() + 300

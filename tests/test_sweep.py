@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
-import sys
 import time
 
 import numpy as np
+from support import cli_in_background
 
 from soft_snake_gym.studies.sweep import STUDIES, StudyGrid, cell_key, read_results, run_sweep
 
@@ -32,12 +31,7 @@ def test_interrupted_sweep_resumes_without_recomputing(tmp_path):
     csv_path = out / "inch-friction.csv"
     # run the real command in a subprocess and kill it (SIGKILL: no clean-up at all) once two
     # cells are written
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "soft_snake_gym.cli", "sweep", "inch-friction", "--out", str(out), *TINY],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    proc = cli_in_background("sweep", "inch-friction", "--out", str(out), *TINY)
     deadline = time.time() + 120
     while time.time() < deadline and len(read_results(csv_path)) < 2 and proc.poll() is None:
         time.sleep(0.02)

@@ -6,13 +6,12 @@ import csv
 import json
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 import yaml
-from support import TINY_TRAINING, cli, ctrl_c_reaches_it
+from support import TINY_TRAINING, cli, cli_in_background
 
 from soft_snake_gym.cli import main
 from soft_snake_gym.training import TrainConfig, load_train_config
@@ -105,30 +104,17 @@ def test_evaluate_loads_the_run_and_resume_continues_it(trained_run):
     assert steps[-1] >= 448 and steps == sorted(steps)
 
 
-def _start_long_training(run, *hyperparams: str, preexec_fn=None) -> subprocess.Popen:
+def _start_long_training(run, *hyperparams: str) -> subprocess.Popen:
     """``soft-snake train`` of 100k tiny steps into ``run`` in a child process, to be interrupted."""
-    command = ["train", "SoftEel-v0", "--n-timesteps", "100000", "--run-dir", str(run), "--no-progress"]
-    return subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "soft_snake_gym.cli",
-            *command,
-            "--hyperparams",
-            *TINY_TRAINING,
-            "eval_freq=0",
-            *hyperparams,
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        preexec_fn=preexec_fn,
+    return cli_in_background(
+        *["train", "SoftEel-v0", "--n-timesteps", "100000", "--run-dir", str(run), "--no-progress"],
+        *["--hyperparams", *TINY_TRAINING, "eval_freq=0", *hyperparams],
     )
 
 
 def test_ctrl_c_keeps_a_checkpoint_that_resumes(tmp_path):
     run = tmp_path / "interrupted"
-    proc = _start_long_training(run, preexec_fn=ctrl_c_reaches_it)
+    proc = _start_long_training(run)
     deadline = time.time() + 240
     while not list((run / "checkpoints").glob("model_*_steps.zip")) and time.time() < deadline:
         time.sleep(0.5)

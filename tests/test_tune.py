@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
-from support import ctrl_c_reaches_it
+from support import cli_in_background
 
 from soft_snake_gym.cli import main
 from soft_snake_gym.config import ConfigError, load_yaml
@@ -104,13 +104,7 @@ def test_three_trials_resume_after_ctrl_c_and_write_a_yaml_that_train_takes(
     args = ["tune", "SoftEel-v0", "--trials", "3", *TINY, "--address", loopback_cluster, "--out", str(out)]
 
     # Ctrl-C once a trial has evaluated mid-run (and checkpointed): Tune saves its state, exit 130
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "soft_snake_gym.cli", *args, "--quiet"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        preexec_fn=ctrl_c_reaches_it,
-    )
+    proc = cli_in_background(*args, "--quiet")
     deadline = time.time() + 300
     while proc.poll() is None and time.time() < deadline:
         if any(len(rows) >= 2 for rows in _curves(out).values()):

@@ -345,8 +345,8 @@ def tune_ppo(settings: TuneSettings, out_dir: str | Path, verbose: int = 1) -> T
     trials = []
     for r in grid:
         rows = read_rows(Path(r.path) / "run" / "learning_curve.csv")
-        if rows and math.isfinite(float(rows[-1][metric])):
-            last = rows[-1]
+        last = rows[-1] if rows else None
+        if last and math.isfinite(float(last[metric])):
             trials.append(
                 ({k: r.config[k] for k in settings.keys}, float(last[metric]), int(last["timesteps"]))
             )
