@@ -356,16 +356,23 @@ class Ground:
         )
 
 
+METHODS = ("auto", "backward_euler", "sdirk2", "symplectic_euler")
+
+
 @dataclass(frozen=True)
 class Integrator:
     """Time integration (docs/model.md §5a).
 
     Attributes:
-        method: ``"backward_euler"`` (default; Newton on the banded analytic Jacobian) or
-            ``"symplectic_euler"`` (explicit, sub-stepped; needs ``Rod.damping_bend > 0`` under
-            the curvature PID, see docs/model.md §5a).
+        method: ``"auto"`` (default): ``"sdirk2"`` in water and out of any medium,
+            ``"backward_euler"`` on the ground. ``"sdirk2"``: two backward-Euler stages per step
+            (second order, L-stable; not on the ground, where friction is decided at the end of
+            one implicit step). ``"backward_euler"``: one implicit step, first order. Both by
+            Newton on the banded analytic Jacobian. ``"symplectic_euler"``: explicit,
+            sub-stepped; needs ``Rod.damping_bend > 0`` under the curvature PID. See
+            docs/model.md §5a.
         h: step [s]; the inputs are held constant over it.
-        substeps: internal steps per ``h``; ``None`` picks 1 for backward Euler and, for the
+        substeps: internal steps per ``h``; ``None`` picks 1 for the implicit methods and, for the
             explicit method, enough that each sub-step is at most 0.5 / omega_max, with
             omega_max the rod's highest stretching frequency.
         newton_tol: tolerance of a Newton step on the momentum residual divided by the node
@@ -379,7 +386,7 @@ class Integrator:
         check_self_intersection: test the body for crossing edges after every step.
     """
 
-    method: Literal["backward_euler", "symplectic_euler"] = "backward_euler"
+    method: Literal["auto", "backward_euler", "sdirk2", "symplectic_euler"] = "auto"
     h: float = 0.01
     substeps: int | None = None
     newton_tol: float = 1e-6
@@ -390,9 +397,9 @@ class Integrator:
 
     def __post_init__(self) -> None:
         """Check ``method`` and the values."""
-        if self.method not in ("backward_euler", "symplectic_euler"):
+        if self.method not in METHODS:
             raise ValueError(
-                f"Integrator.method = {self.method!r} is unknown; use 'backward_euler' or 'symplectic_euler'"
+                f"Integrator.method = {self.method!r} is unknown; use one of {', '.join(map(repr, METHODS))}"
             )
         _check(self, "h", 0.0, 1.0, lo_open=True)
         if self.substeps is not None:
@@ -434,3 +441,16 @@ class SimConfig:
                 raise ValueError(
                     f"SimConfig.{f.name} must be a {expected[f.name].__name__}, got {type(value).__name__}"
                 )
+        if self.medium == "ground" and self.integrator.method == "sdirk2":
+            raise ValueError(
+                "SimConfig: integrator.method = 'sdirk2' does not run on the ground, where friction "
+                "is decided at the end of one backward-Euler step (docs/model.md §5); use "
+                "'backward_euler' or 'auto'"
+            )
+
+    @property
+    def method(self) -> str:
+        """The integration method in use: ``integrator.method`` with ``"auto"`` resolved by medium."""
+        if self.integrator.method != "auto":
+            return self.integrator.method
+        return "backward_euler" if self.medium == "ground" else "sdirk2"

@@ -46,36 +46,39 @@ WORM = [
     "random",
 ]
 CASES = [("SoftEel-v0", s) for s in EEL] + [("SoftWorm-v0", s) for s in WORM]
+#: the circulant chain from rest on the thesis gait, where its phases need not lock in
+ON_GAIT = {"start_on_gait": {}}
 
 #: (env, policy) -> what does not converge today (measured at factors 1, 4, 16, seed 0; the
 #: ratios are value / value at h/16, for h = 0.01 s, h/4, h/16).
 KNOWN_FAILING = {
-    ("SoftEel-v0", "decentralized"): "curvature error 0.0369, 0.0287, 0.0421 (31.7 %), irregular in h "
-    "(0.0343, 0.0325, 0.0361, 0.0235 at h/2, h/8, h/32, h/64): from the env's noisy start the chain's "
-    "phases lock in after the 2 s transient, along a path that depends on h; from rest on the gait it "
-    "settles and converges (error over 2-6 s 0.0066, 0.0072, 0.0075), and over 60 s (10 s transient) "
-    "speed, fluid power and actuator energy agree within 1.2 %",
-    ("SoftEel-v0", "decentralized:closure=pacemaker"): "fluid power 4.00, 4.10, 4.38 W (8.8 %); "
-    "curvature error 0.0155, 0.0182, 0.0218: the same late lock-in; over 60 s (10 s transient) speed, "
-    "power and energy agree within 2.5 %, the error still drifts (0.0044, 0.0053, 0.0058)",
-    ("SoftEel-v0", "random"): "fluid power 5.39, 6.02, 6.25 W (13.7 %; first order, 6.32 W at h/64): "
-    "rates that jump every step excite modes that backward Euler damps at h = 0.01 s; a first-order lag "
-    "on the rates of 0.05 s still leaves 8.5 % (4.0 % needs 0.2 s, a sluggish actuator)",
+    ("SoftEel-v0", "decentralized"): "curvature error 0.0247, 0.0431, 0.0380 (35 %; speed and fluid "
+    "power within 3.9 %): from the env's noisy start the chain's phases lock in after the 2 s "
+    "transient into one of several patterns, and which one turns on differences far below the "
+    "integration error. Seed 0 at h/2 ... h/64: 0.0399, 0.0431, 0.0376, 0.0380, 0.0383, 0.0387; "
+    "seeds 1-5 at h, h/4, h/16 disagree as much, and seed 4 at h/4 stops swimming (0.00001 m/s). "
+    "From rest on the gait the same controller converges (the case below)",
     ("SoftWorm-v0", "random"): "friction energy 72.9, 94.4, 135.3 J: stretching rings at 950 rad/s after "
-    "every jump of the rates, which h = 0.01 s cannot resolve",
+    "every jump of the rates, which h = 0.01 s cannot resolve (SDIRK2, not used on the ground: "
+    "169.5, 278.6, 306.4 J). A first-order actuator lag (not shipped) of 0.02, 0.05, 0.1 s gives "
+    "39.7, 45.1, 49.1 J (19 %), 27.0, 28.4, 29.2 J (7.5 %), 19.2, 19.7, 20.0 J (3.8 %)",
 }
 
 
-def _case(env_id: str, spec: str):
-    reason = KNOWN_FAILING.get((env_id, spec))
+def _case(env_id: str, spec: str, env_kwargs: dict | None = None):
+    reason = None if env_kwargs else KNOWN_FAILING.get((env_id, spec))
     marks = [pytest.mark.xfail(reason=reason, strict=True, raises=AssertionError)] if reason else []
-    return pytest.param(env_id, spec, marks=marks, id=f"{env_id}-{spec}")
+    label = f"{env_id}-{spec}" + ("-on-gait" if env_kwargs else "")
+    return pytest.param(env_id, spec, env_kwargs, marks=marks, id=label)
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
-@pytest.mark.parametrize(("env_id", "spec"), [_case(*c) for c in CASES])
-def test_episode_metrics_do_not_depend_on_the_time_step(env_id, spec):
-    result = convergence(env_id, spec, factors=(1, 4, 16), seed=0)
+@pytest.mark.parametrize(
+    ("env_id", "spec", "env_kwargs"),
+    [_case(*c) for c in CASES] + [_case("SoftEel-v0", "decentralized", ON_GAIT)],
+)
+def test_episode_metrics_do_not_depend_on_the_time_step(env_id, spec, env_kwargs):
+    result = convergence(env_id, spec, env_kwargs=env_kwargs, factors=(1, 4, 16), seed=0)
     assert result.substeps == [1, 4, 16]
     assert not any(result.failures), format_convergence(result)
     checked = [m for m in result.values if result.passed(m) is not None]

@@ -37,6 +37,7 @@ CONFIGS = Path(__file__).resolve().parents[1] / "soft_snake_gym" / "configs" / "
         (lambda: Integrator(newton_chord_rate=1.0), "Integrator.newton_chord_rate", "1.0"),
         (lambda: Integrator(newton_chord_rate=-0.1), "Integrator.newton_chord_rate", "-0.1"),
         (lambda: SimConfig(medium="lava"), "SimConfig.medium", "lava"),
+        (lambda: SimConfig(medium="ground", integrator=Integrator(method="sdirk2")), "ground", "sdirk2"),
     ],
 )
 def test_impossible_parameters_name_field_value_and_range(make, field, value):
@@ -45,6 +46,13 @@ def test_impossible_parameters_name_field_value_and_range(make, field, value):
     msg = str(err.value)
     assert field in msg and value in msg
     assert any(w in msg for w in ("range", "must", "use", "allowed"))
+
+
+def test_auto_method_is_sdirk2_in_water_and_backward_euler_on_the_ground():
+    assert SimConfig().method == "sdirk2" and SimConfig(medium="none").method == "sdirk2"
+    assert SimConfig(medium="ground").method == "backward_euler"
+    chosen = Integrator(method="backward_euler")
+    assert SimConfig(integrator=chosen).method == "backward_euler"
 
 
 def test_derived_stiffnesses_follow_model_md():
@@ -102,6 +110,7 @@ def test_thesis_preset_is_the_sources_setting_and_overrides_win_field_by_field(t
     thesis = load_preset("thesis")  # set explicitly, whatever the package defaults become
     assert thesis["rod"]["damping_bend"] == 0.0 and thesis["rod"]["damping_stretch"] == 0.0
     assert thesis["fluid"]["added_mass"] == "kelasidi"
+    assert thesis["integrator"]["method"] == "backward_euler"
     merged = with_preset(
         {"preset": "thesis", "rod": {"damping_bend": 2.5, "E_bend": 1e5}, "medium": "ground"}
     )

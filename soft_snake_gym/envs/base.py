@@ -95,7 +95,7 @@ class SoftRobotEnv(gym.Env):
             warnings.warn(
                 f"{self.env_id}: integrator.method = 'symplectic_euler' takes {n:,} sub-steps per "
                 f"h = {settings.integrator.h:g} s for this rod (its stiffest elastic mode or its damping), so every "
-                "step is slow; use 'backward_euler' (one implicit step per h) or a softer or "
+                "step is slow; use 'auto' (implicit, one or two stages per h) or a softer or "
                 "coarser rod",
                 stacklevel=2,
             )

@@ -129,7 +129,7 @@ class InchEnv(SoftRobotEnv):
     |-----------------------|-------------------|----------------|-----------------------------------------------------------------------------|
     | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: ground` key is accepted)        |
     | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
-    | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass), whose closed-loop results depend on the step (docs/model.md §5a) |
+    | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass, backward Euler), whose closed-loop results depend on the step (docs/model.md §5a) |
     | `rod`                 | dict or `Rod`     | `Rod()`        | the body (docs/model.md §9); `refine`: the same robot with that many nodes       |
     | `fluid`               | dict or `Fluid`   | `Fluid()`      | unused on the ground                                                        |
     | `ground`              | dict or `Ground`  | `Ground()`     | friction: mu_s, mu_d, V_tol, g                                              |

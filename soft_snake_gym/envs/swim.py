@@ -175,11 +175,11 @@ class SwimEnv(SoftRobotEnv):
     |-----------------------|-------------------|----------------|-----------------------------------------------------------------------------|
     | `config`              | str or Path       | `None`         | YAML file of any keywords below (a `medium: water` key is accepted)         |
     | `render_mode`         | str               | `None`         | `"rgb_array"` (headless image) or `"human"` (a window; needs a display)     |
-    | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass), whose closed-loop results depend on the step (docs/model.md §5a) |
+    | `preset`              | str or None       | `None`         | named physics preset laid beneath `rod`/`fluid`/`ground`/`integrator`, field by field; `"thesis"`: the sources' setting (no damping, Kelasidi added mass, backward Euler), whose closed-loop results depend on the step (docs/model.md §5a) |
     | `rod`                 | dict or `Rod`     | `Rod()`        | the body (docs/model.md §9): N, edge length and mass, a, b, E, damping_bend, damping_stretch; `refine`: the same robot with that many nodes (`Rod.refined`) |
     | `fluid`               | dict or `Fluid`   | `Fluid()`      | water: rho, C_f, C_D, C_A                                                   |
     | `ground`              | dict or `Ground`  | `Ground()`     | unused in water; kept so one YAML file can describe both settings           |
-    | `integrator`          | dict or `Integrator` | `Integrator()` | backward Euler at h = 0.01 s by default (docs/model.md §5a)                   |
+    | `integrator`          | dict or `Integrator` | `Integrator()` | SDIRK2 (second order) at h = 0.01 s by default (docs/model.md §5a)           |
     | `dt`                  | float or None     | `None`         | control step (s), a multiple of `integrator.h`; `None`: `integrator.h`      |
     | `max_curvature_rate`  | float             | `2 pi`         | curvature rate (1/s) of action 1.0 (per node of the robot as designed)      |
     | `max_rest_curvature`  | float             | `4.0`          | bound on `|kbar|` (turning angle 127°)                                      |

@@ -24,7 +24,11 @@ __all__ = [
 
 _MEDIA = {"none": L.MEDIUM_NONE, "water": L.MEDIUM_WATER, "ground": L.MEDIUM_GROUND}
 _ADDED_MASS = {"consistent": L.ADDED_MASS_CONSISTENT, "kelasidi": L.ADDED_MASS_KELASIDI}
-_METHODS = {"backward_euler": L.METHOD_BACKWARD_EULER, "symplectic_euler": L.METHOD_SYMPLECTIC_EULER}
+_METHODS = {
+    "backward_euler": L.METHOD_BACKWARD_EULER,
+    "symplectic_euler": L.METHOD_SYMPLECTIC_EULER,
+    "sdirk2": L.METHOD_SDIRK2,
+}
 
 
 class SimulationError(RuntimeError):
@@ -41,14 +45,14 @@ def node_masses(config: SimConfig) -> np.ndarray:
 def auto_substeps(config: SimConfig) -> int:
     """Sub-steps per ``h``.
 
-    1 for backward Euler; for the explicit method enough that each is at most ``0.5 / omega_max``
+    1 for the implicit methods; for the explicit method enough that each is at most ``0.5 / omega_max``
     and ``1 / (damping rate)``, with Gershgorin bounds on the highest elastic frequency and the
     fastest damping rate.
     """
     integ, rod = config.integrator, config.rod
     if integ.substeps is not None:
         return integ.substeps
-    if integ.method == "backward_euler":
+    if config.method != "symplectic_euler":
         return 1
     l0 = rod.edge_length
     omega_max = 2.0 * math.sqrt((rod.EA / l0 + 16.0 * rod.EI / l0**3) / rod.edge_mass)
@@ -84,7 +88,7 @@ def pack_params(config: SimConfig, prm: np.ndarray) -> None:
     prm[L.P_MAXIT] = it.newton_max_iter
     prm[L.P_CHORD] = it.newton_chord_rate
     prm[L.P_MEDIUM] = _MEDIA[config.medium]
-    prm[L.P_METHOD] = _METHODS[it.method]
+    prm[L.P_METHOD] = _METHODS[config.method]
     prm[L.P_MAXSTRAIN] = it.max_strain
     prm[L.P_CHECKSI] = float(it.check_self_intersection)
 
@@ -419,9 +423,9 @@ class Simulator:
         delta_kinetic + delta_elastic + delta_fluid_kinetic + error``, all in J.
 
         ``delta_*`` are the changes of the body's kinetic energy, its elastic energy and the
-        water's kinetic energy ``T_f``. ``error`` is what the integrator created (> 0) or
-        destroyed (< 0), e.g. backward Euler's numerical damping; it shrinks with the step for
-        the consistent added mass. Work of :meth:`set_external_force` forces is not counted
+        water's kinetic energy ``T_f``. ``error`` is the work that the integrator destroyed (> 0,
+        e.g. backward Euler's numerical damping) or created (< 0); it shrinks with the step for
+        the consistent added mass, as ``h`` under backward Euler and as ``h^2`` under SDIRK2. Work of :meth:`set_external_force` forces is not counted
         (it shows up in ``error``).
         """
         return dict(

@@ -41,6 +41,7 @@ from soft_snake_gym.physics.layout import (
     B_R,
     B_V0,
     B_VACC,
+    B_VSTEP,
     BAD_REST_LENGTH,
     I_FRICTION,
     I_ORDER,
@@ -49,6 +50,7 @@ from soft_snake_gym.physics.layout import (
     MAX_SWITCHES,
     MEDIUM_GROUND,
     MEDIUM_WATER,
+    METHOD_SDIRK2,
     METHOD_SYMPLECTIC_EULER,
     NON_FINITE,
     NOT_CONVERGED,
@@ -98,6 +100,10 @@ from soft_snake_gym.physics.layout import (
     STUCK,
     SimArrays,
 )
+
+#: SDIRK2's diagonal coefficient (Alexander 1977): two backward-Euler stages of ``GAMMA dt``,
+#: second order and L-stable, stiffly accurate (the step ends at the second stage)
+GAMMA = 1.0 - 1.0 / math.sqrt(2.0)
 
 # the cached kernels embed the code of the kernels they call from these files
 drop_stale_cache(__file__, [banded.__file__, forces.__file__, geometry.__file__, layout.__file__])
@@ -264,18 +270,23 @@ def _release(v, state, i, px, py, vtol):
 
 
 @njit(cache=True, error_model="numpy")
-def _be_substep(s, dt, medium):
+def _be_substep(s, dt, medium, extrapolate):
     """One backward-Euler step by damped Newton on the banded analytic Jacobian (docs/model.md §5a).
 
-    Returns (status, iterations, residual, fluid power, friction power).
+    The first guess of the velocity in water extrapolates the last step's change by the
+    fraction ``extrapolate`` (1: a step as long as the last). Returns (status, iterations,
+    residual, fluid power, friction power).
     """
+    _be_start(s, medium, extrapolate)
+    return _be_newton(s, dt, medium)
+
+
+@njit(cache=True, error_model="numpy")
+def _be_start(s, medium, extrapolate):
+    """Record the start of an implicit step in ``buf`` and make the first guess (contacts, velocity)."""
     q, v, prm, buf, J, ibuf = s.q, s.v, s.prm, s.buf, s.J, s.ibuf
     n = q.size
-    q0, v0, vacc, dv = buf[B_Q0], buf[B_V0], buf[B_VACC], buf[B_DV]
-    R = buf[B_R]
-    piv = ibuf[I_PIV]
-    tol = prm[P_TOL]
-    maxit = int(prm[P_MAXIT])
+    q0, v0 = buf[B_Q0], buf[B_V0]
     if medium == MEDIUM_GROUND:
         # first guess of the contacts: slow nodes stick, the rest slide, and a stuck node whose
         # holding force at the start of the step (the rest shape already moved) exceeds
@@ -306,11 +317,55 @@ def _be_substep(s, dt, medium):
             q0[i] = q[i]
             v_prev = v0[i]
             v0[i] = v[i]
-            v[i] = 2.0 * v[i] - v_prev
+            v[i] += extrapolate * (v[i] - v_prev)
         if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
             p0 = buf[B_P0]
             p0[:] = 0.0
             fluid_momentum(q0, v0, prm, p0, 1.0, 0.0, J, 0.0, False)
+
+
+@njit(cache=True, error_model="numpy")
+def _sdirk2_second_start(s, medium):
+    """Turn the end of SDIRK2's first stage into the start of its second (docs/model.md §5a).
+
+    The second stage is a backward-Euler step of ``GAMMA dt`` from the start moved along the
+    first stage's change by ``(1 - GAMMA)/GAMMA``: position, velocity and, with the consistent
+    added mass, the water's momentum. The step's start velocity is kept in ``buf[B_VSTEP]``.
+    The first guess extrapolates the first stage's velocity change to the end of the step;
+    contacts keep the first stage's consistent set.
+    """
+    q, v, prm, buf, J, ibuf = s.q, s.v, s.prm, s.buf, s.J, s.ibuf
+    n = q.size
+    q0, v0, vstep = buf[B_Q0], buf[B_V0], buf[B_VSTEP]
+    c = (1.0 - GAMMA) / GAMMA
+    if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
+        p0, p1 = buf[B_P0], buf[B_A]
+        p1[:] = 0.0
+        fluid_momentum(q, v, prm, p1, 1.0, 0.0, J, 0.0, False)
+        for i in range(n):
+            p0[i] += c * (p1[i] - p0[i])
+    for i in range(n):
+        vstep[i] = v0[i]
+        change = v[i] - v0[i]
+        q0[i] += c * (q[i] - q0[i])
+        v0[i] += c * change
+        v[i] = v0[i] + change
+    if medium == MEDIUM_GROUND:
+        switches = ibuf[I_SWITCHES]
+        for i in range(n // 2):
+            switches[i] = 0
+
+
+@njit(cache=True, error_model="numpy")
+def _be_newton(s, dt, medium):
+    """Solve the implicit step that :func:`_be_start` set up; see :func:`_be_substep`."""
+    q, v, prm, buf, J, ibuf = s.q, s.v, s.prm, s.buf, s.J, s.ibuf
+    n = q.size
+    vacc, dv = buf[B_VACC], buf[B_DV]
+    R = buf[B_R]
+    piv = ibuf[I_PIV]
+    tol = prm[P_TOL]
+    maxit = int(prm[P_MAXIT])
     norm2, rmax, p_fluid, p_fric = _be_residual(s, dt, medium, True)
     it = 0
     pass_it = 0
@@ -463,6 +518,53 @@ def ledger_energies(s):
 
 
 @njit(cache=True, error_model="numpy")
+def _move_rest_shape(kbar, lbar, u_k, u_l, dt):
+    """Advance the rest shape by ``dt`` of the inputs; ``BAD_REST_LENGTH`` if a rest length ends <= 0."""
+    for j in range(kbar.size):
+        kbar[j] += dt * u_k[j]
+    status = OK
+    for k in range(lbar.size):
+        lbar[k] += dt * u_l[k]
+        if not lbar[k] > 0.0:
+            status = BAD_REST_LENGTH
+    return status
+
+
+@njit(cache=True, error_model="numpy")
+def _sdirk2_substep(s, dt, medium, u_k, u_l, damped):
+    """One SDIRK2 step of ``dt`` (docs/model.md §5a): two backward-Euler stages of ``GAMMA dt``.
+
+    The rest shape moves to each stage's time before it is solved. The step's energies are its
+    powers at the two stage ends weighted by the method's quadrature, ``1 - GAMMA`` and
+    ``GAMMA``. Returns (status, iterations of both stages, residual, fluid, damping and
+    friction energy, actuator work) [J].
+    """
+    q, v, kbar, lbar, prm, buf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf
+    e_fluid = e_damp = e_fric = e_act = 0.0
+    status, iters, res = OK, 0, 0.0
+    for stage in range(2):
+        status = _move_rest_shape(kbar, lbar, u_k, u_l, (GAMMA if stage == 0 else 1.0 - GAMMA) * dt)
+        if status != OK:
+            break
+        if stage == 0:
+            status, it, res, p_fluid, p_fric = _be_substep(s, GAMMA * dt, medium, GAMMA)
+        else:
+            _sdirk2_second_start(s, medium)
+            status, it, res, p_fluid, p_fric = _be_newton(s, GAMMA * dt, medium)
+            buf[B_V0, :] = buf[B_VSTEP]  # the step's start, for the next step's first guess
+        iters += it
+        w = (1.0 - GAMMA if stage == 0 else GAMMA) * dt
+        e_fluid += w * p_fluid
+        e_fric += w * p_fric
+        e_act += w * actuator_power(q, kbar, lbar, u_k, u_l, prm)
+        if damped:
+            e_damp += w * damping_power(q, v, prm)
+        if status != OK:
+            break
+    return status, iters, res, e_fluid, e_damp, e_fric, e_act
+
+
+@njit(cache=True, error_model="numpy")
 def simulate(s, u_k, u_l, n_steps):
     """Advance one robot by ``n_steps`` steps of ``h`` with inputs held constant; stops at the first failure.
 
@@ -487,6 +589,7 @@ def simulate(s, u_k, u_l, n_steps):
     dt = h / nsub
     medium = int(prm[P_MEDIUM])
     symplectic = int(prm[P_METHOD]) == METHOD_SYMPLECTIC_EULER
+    sdirk2 = int(prm[P_METHOD]) == METHOD_SDIRK2
     damped = prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0
     status = OK
     for _ in range(n_steps):
@@ -497,36 +600,36 @@ def simulate(s, u_k, u_l, n_steps):
         niter = 0
         resid = 0.0
         for _s in range(nsub):
-            # the inputs' work over the sub-step by the trapezoidal rule on P_act: exact for a
-            # body that lags the rest shape and for one that follows it at once, where a
-            # one-point rule charges inputs that reverse every step with work never done
-            p_act0 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
-            for j in range(kbar.size):
-                kbar[j] += dt * u_k[j]
-            for k in range(lbar.size):
-                lbar[k] += dt * u_l[k]
-                if not lbar[k] > 0.0:
-                    status = BAD_REST_LENGTH
-            if status != OK:
-                break
-            # each power where the step evaluates its forces: start (explicit) or end (implicit)
-            p_damp = 0.0
-            if symplectic:
-                p_act1 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
-                if damped:
-                    p_damp = damping_power(q, v, prm)
-                p_fluid, p_fric = _symplectic_substep(s, dt, medium)
+            if sdirk2:
+                status, it, res, ef, ed, efr, ea = _sdirk2_substep(s, dt, medium, u_k, u_l, damped)
             else:
-                status, it, res, p_fluid, p_fric = _be_substep(s, dt, medium)
-                niter = max(niter, it)
-                resid = max(resid, res)
-                p_act1 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
-                if damped:
-                    p_damp = damping_power(q, v, prm)
-            e_fluid += dt * p_fluid
-            e_damp += dt * p_damp
-            e_fric += dt * p_fric
-            e_act += 0.5 * dt * (p_act0 + p_act1)
+                # the inputs' work over the sub-step by the trapezoidal rule on P_act: exact for
+                # a body that lags the rest shape and for one that follows it at once, where a
+                # one-point rule charges inputs that reverse every step with work never done
+                p_act0 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+                status = _move_rest_shape(kbar, lbar, u_k, u_l, dt)
+                if status != OK:
+                    break
+                # each power where the step evaluates its forces: start (explicit) or end (implicit)
+                p_damp = 0.0
+                it, res = 0, 0.0
+                if symplectic:
+                    p_act1 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+                    if damped:
+                        p_damp = damping_power(q, v, prm)
+                    p_fluid, p_fric = _symplectic_substep(s, dt, medium)
+                else:
+                    status, it, res, p_fluid, p_fric = _be_substep(s, dt, medium, 1.0)
+                    p_act1 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+                    if damped:
+                        p_damp = damping_power(q, v, prm)
+                ef, ed, efr, ea = dt * p_fluid, dt * p_damp, dt * p_fric, 0.5 * dt * (p_act0 + p_act1)
+            niter = max(niter, it)
+            resid = max(resid, res)
+            e_fluid += ef
+            e_damp += ed
+            e_fric += efr
+            e_act += ea
             if status != OK:
                 break
         if status == OK or status == NOT_CONVERGED:

@@ -12,7 +12,8 @@ Default gains are (Kp, Kd, Ki) = (10, 2, 1), the sources' second set, not (10, 1
 model. Measured from rest at the thesis gait, mean curvature error over 2-6 s with the
 integration step divided by 16 (converged): centralized 0.0063, pacemaker 0.037, circulant
 0.056 with (10, 1, 5); 0.0054, 0.0061, 0.0075 with (10, 2, 1). At the default step backward
-Euler's numerical damping hides the instability (0.0055, 0.0054, 0.0145 with (10, 1, 5)).
+Euler's numerical damping hid the instability (0.0055, 0.0054, 0.0145 with (10, 1, 5));
+SDIRK2, the default in water since, shows it there too (circulant 0.063).
 """
 
 from __future__ import annotations
