@@ -513,6 +513,10 @@ def test_config_errors_name_the_key_and_the_fix(tmp_path):
         gym.make("SoftEel-v0", dt=0.015)
     with pytest.raises(ConfigError, match="rest_length_limits"):
         gym.make("SoftWorm-v0", rest_length_limits=[1.2, 1.5])
+    with pytest.raises(
+        ValueError, match="'sdirk2' does not run on the ground.*use 'backward_euler' or 'auto'"
+    ):
+        gym.make("SoftWorm-v0", integrator={"method": "sdirk2"})
 
 
 def test_physics_keywords_reach_the_simulator():
