@@ -331,10 +331,10 @@ def _sdirk2_second_start(s, medium):
     The second stage is a backward-Euler step of ``GAMMA dt`` from the start moved along the
     first stage's change by ``(1 - GAMMA)/GAMMA``: position, velocity and, with the consistent
     added mass, the water's momentum. The step's start velocity is kept in ``buf[B_VSTEP]``.
-    The first guess extrapolates the first stage's velocity change to the end of the step;
-    contacts keep the first stage's consistent set.
+    The first guess extrapolates the first stage's velocity change to the end of the step.
+    Never on the ground (``SimConfig`` rejects it there), so no contacts to carry over.
     """
-    q, v, prm, buf, J, ibuf = s.q, s.v, s.prm, s.buf, s.J, s.ibuf
+    q, v, prm, buf, J = s.q, s.v, s.prm, s.buf, s.J
     n = q.size
     q0, v0, vstep = buf[B_Q0], buf[B_V0], buf[B_VSTEP]
     c = (1.0 - GAMMA) / GAMMA
@@ -350,10 +350,6 @@ def _sdirk2_second_start(s, medium):
         q0[i] += c * (q[i] - q0[i])
         v0[i] += c * change
         v[i] = v0[i] + change
-    if medium == MEDIUM_GROUND:
-        switches = ibuf[I_SWITCHES]
-        for i in range(n // 2):
-            switches[i] = 0
 
 
 @njit(cache=True, error_model="numpy")
