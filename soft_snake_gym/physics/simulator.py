@@ -425,8 +425,8 @@ class Simulator:
         ``delta_*`` are the changes of the body's kinetic energy, its elastic energy and the
         water's kinetic energy ``T_f``. ``error`` is the work that the integrator destroyed (> 0,
         e.g. backward Euler's numerical damping) or created (< 0); it shrinks with the step for
-        the consistent added mass, as ``h`` under backward Euler and as ``h^2`` under SDIRK2. Work of :meth:`set_external_force` forces is not counted
-        (it shows up in ``error``).
+        the consistent added mass, as ``h`` under backward Euler and as ``h^2`` under SDIRK2.
+        Work of :meth:`set_external_force` forces is not counted (it shows up in ``error``).
         """
         return dict(
             zip(L.LEDGER_KEYS, self.arrays.out[L.O_LEDGER : L.O_LEDGER + L.N_LEDGER].tolist(), strict=True)
