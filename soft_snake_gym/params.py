@@ -149,6 +149,13 @@ class Rod:
         damping_stretch: Kelvin-Voigt damping of stretching: a force ``-damping_stretch`` times
             the stretch rate along each edge [N s/m] (docs/model.md §3). Default 0: no baseline
             needs it to converge.
+        length_lag: time constant of the length actuators [s]: the rest-length rates follow the
+            commanded ``u_l`` with a first-order lag, ``tau d(lbar_dot)/dt = u_l - lbar_dot``
+            (integrated exactly over each step; docs/model.md §3). Default 0.05: a rate that
+            jumps at once rings the stretching mode (950 rad/s) on the ground, which a 0.01 s
+            step cannot resolve; with 0.05 s random actions on the worm give the same friction
+            energy within 10 % at h, h/4 and h/16 (0.02 s: 19 %). 0: the rates jump (the sources'
+            setting, ``preset="thesis"``). The curvature inputs ``u_k`` act at once.
         refined_from: node count of the robot this rod refines (the robot as designed, whose
             per-node gait parameters apply); None: the rod is not a refinement.
         damping: removed; passing it raises an error naming ``damping_bend`` and
@@ -167,6 +174,7 @@ class Rod:
     E_bend: float | None = None
     damping_bend: float = 1.0
     damping_stretch: float = 0.0
+    length_lag: float = 0.05
     refined_from: int | None = None
     damping: InitVar[float | None] = None
     refine: InitVar[int | None] = None
@@ -191,6 +199,7 @@ class Rod:
             _check(self, "E_bend", 0.0, None, lo_open=True)
         _check(self, "damping_bend", 0.0, None)
         _check(self, "damping_stretch", 0.0, None)
+        _check(self, "length_lag", 0.0, 10.0)
         if self.refined_from is not None:
             _check_int(self, "refined_from", 3, 100_000)
         if refine is not None:

@@ -52,7 +52,7 @@ def test_every_cited_section_of_the_model_exists():
 
 
 @pytest.mark.parametrize(
-    "name", ["damping_bend", "damping_stretch", "added_mass", "mu_forward", "duty", "refine"]
+    "name", ["damping_bend", "damping_stretch", "length_lag", "added_mass", "mu_forward", "duty", "refine"]
 )
 def test_the_model_documents_the_new_parameters(name):
     assert name in (ROOT / "docs" / "model.md").read_text()

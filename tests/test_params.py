@@ -25,6 +25,8 @@ CONFIGS = Path(__file__).resolve().parents[1] / "soft_snake_gym" / "configs" / "
         (lambda: Rod(damping_bend=-0.1), "Rod.damping_bend", "-0.1"),
         (lambda: Rod(damping_stretch=float("nan")), "Rod.damping_stretch", "nan"),
         (lambda: Rod(damping=1.0), "damping_bend", "damping_stretch"),
+        (lambda: Rod(length_lag=-0.01), "Rod.length_lag", "-0.01"),
+        (lambda: Rod(length_lag=float("inf")), "Rod.length_lag", "inf"),
         (lambda: Fluid(rho=-1.0), "Fluid.rho", "-1.0"),
         (lambda: Fluid(added_mass="munk"), "Fluid.added_mass", "munk"),
         (lambda: Ground(mu_s=0.5, mu_d=0.8), "Ground.mu_d", "0.8"),
@@ -109,13 +111,14 @@ def test_thesis_preset_is_the_sources_setting_and_overrides_win_field_by_field(t
     assert "thesis" in presets()
     thesis = load_preset("thesis")  # set explicitly, whatever the package defaults become
     assert thesis["rod"]["damping_bend"] == 0.0 and thesis["rod"]["damping_stretch"] == 0.0
+    assert thesis["rod"]["length_lag"] == 0.0
     assert thesis["fluid"]["added_mass"] == "kelasidi"
     assert thesis["integrator"]["method"] == "backward_euler"
     merged = with_preset(
         {"preset": "thesis", "rod": {"damping_bend": 2.5, "E_bend": 1e5}, "medium": "ground"}
     )
     assert "preset" not in merged and merged["medium"] == "ground"
-    assert merged["rod"] == {"damping_bend": 2.5, "damping_stretch": 0.0, "E_bend": 1e5}
+    assert merged["rod"] == {"damping_bend": 2.5, "damping_stretch": 0.0, "length_lag": 0.0, "E_bend": 1e5}
     assert merged["fluid"] == {"added_mass": "kelasidi"}
     # a whole dataclass given explicitly replaces the preset's section
     assert with_preset({"preset": "thesis", "fluid": Fluid(rho=1025.0)})["fluid"] == Fluid(rho=1025.0)
@@ -124,7 +127,7 @@ def test_thesis_preset_is_the_sources_setting_and_overrides_win_field_by_field(t
     path = tmp_path / "thesis_soft.yaml"
     path.write_text("preset: thesis\nrod:\n  E_bend: 1.87e4\n")
     cfg = load_sim_config(path)
-    assert cfg.rod == Rod(E_bend=1.87e4, damping_bend=0.0, damping_stretch=0.0)
+    assert cfg.rod == Rod(E_bend=1.87e4, damping_bend=0.0, damping_stretch=0.0, length_lag=0.0)
     assert cfg.fluid == Fluid(added_mass="kelasidi")
 
 

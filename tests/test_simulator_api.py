@@ -48,6 +48,30 @@ def test_observables_and_energy_accounting():
     assert sim.time == 0.0 and sim.fluid_energy == 0.0 and np.all(sim.kbar == 0)
 
 
+@pytest.mark.parametrize("substeps", [1, 4])
+def test_length_actuators_follow_the_inputs_through_an_exact_first_order_lag(substeps):
+    tau, u = 0.05, np.linspace(-0.05, 0.05, 9)
+    cfg = SimConfig(medium="ground", rod=Rod(length_lag=tau), integrator=Integrator(substeps=substeps))
+    sim = Simulator(cfg)
+    for n in range(1, 31):
+        assert sim.step(u_l=u)
+        t = n * sim.h  # lbar_dot = u (1 - exp(-t/tau)), integrated
+        np.testing.assert_allclose(sim.lbar_dot, u * (1 - np.exp(-t / tau)), rtol=1e-12, atol=1e-15)
+        expected = 0.18 + u * (t - tau * (1 - np.exp(-t / tau)))
+        np.testing.assert_allclose(sim.lbar, expected, rtol=1e-12)
+    # the actuators keep their rate when the command stops, and reset stops them
+    rate = sim.lbar_dot
+    assert sim.step(u_l=np.zeros(9))
+    np.testing.assert_allclose(sim.lbar_dot, rate * np.exp(-sim.h / tau), rtol=1e-12)
+    sim.reset()
+    assert np.all(sim.lbar_dot == 0.0) and np.all(sim.lbar == 0.18)
+    # without lag the rates are the inputs at once
+    sim = Simulator(SimConfig(medium="ground", rod=Rod(length_lag=0.0)))
+    assert sim.step(u_l=u)
+    np.testing.assert_array_equal(sim.lbar_dot, u)
+    np.testing.assert_allclose(sim.lbar, 0.18 + sim.h * u, rtol=1e-14)
+
+
 @pytest.mark.parametrize(
     "kwargs,match",
     [
@@ -112,11 +136,11 @@ def test_self_intersection_is_reported_and_stops_the_simulation():
 def test_runaway_stretch_and_bad_rest_length_are_reported():
     sim = Simulator()
     u_l = np.zeros(9)
-    u_l[3] = 200.0  # the rest length races ahead of the edge within a step
+    u_l[3] = 2000.0  # the rest length races ahead of the edge within a step, through the lag
     assert not sim.step(u_l=u_l)
     assert sim.failure == "runaway_stretch"
     sim.reset()
-    assert not sim.step(u_l=np.full(9, -100.0))
+    assert not sim.step(u_l=np.full(9, -1000.0))
     assert sim.failure == "non_positive_rest_length"
 
 

@@ -53,16 +53,20 @@ class InchEnv(SoftRobotEnv):
     ``mu_d = 0.8``; docs/model.md §5), its rest shape straight. The agent moves the rest lengths
     ``lbar`` of the 9 edges; a peristaltic compression pulse travelling from tail to head
     (``soft_snake_gym.gaits.pulse_wave``, eps = 0.3, omega = 2 pi rad/s, delta_l = 2 pi/9,
-    duty 0.6: the ``inching`` baseline) inches forward at about 0.13 m/s, while a sinusoidal
+    duty 0.6: the ``inching`` baseline) inches forward at about 0.127 m/s, while a sinusoidal
     wave that changes every edge at once barely moves it. The task is to move along the goal
     direction (+x by default, the head ahead).
 
     ## Action Space
-    A `Box(-1, 1, (N-1,), float32)`: the length rates ``u_l = max_length_rate * action`` [m/s]
-    of the edges, held over the control step (``d lbar/dt = u_l``). Actions outside [-1, 1]
+    A `Box(-1, 1, (N-1,), float32)`: the commanded length rates ``u_l = max_length_rate *
+    action`` [m/s] of the edges, held over the control step. The rest lengths follow them
+    through the length actuators' first-order lag ``Rod.length_lag`` (default 0.05 s;
+    ``tau d(lbar_dot)/dt = u_l - lbar_dot``, docs/model.md §3), so ``lbar`` moves smoothly and
+    ``lbar_dot`` approaches ``u_l`` within about 3 tau; the edge length rates observed follow
+    ``lbar_dot`` closely (stretching is stiff). Actions outside [-1, 1]
     are clipped; a NaN or a wrong shape raises ``ValueError``. A rate that would carry
     ``lbar`` outside ``rest_length_limits`` (fractions of the edge length) is cut so that
-    ``lbar`` stops at the bound. The default ``max_length_rate = 0.3`` m/s covers the inching
+    ``lbar`` stops at the bound (early enough that the lag does not carry it past). The default ``max_length_rate = 0.3`` m/s covers the inching
     wave's peak rate ``0.5 l0 eps omega = 0.17`` m/s at eps = 0.3, omega = 2 pi, with room
     for feedback. On a refined rod (``rod={"refine": N}``) ``max_length_rate`` (as given,
     that of the robot as designed) is scaled by ``Rod.edge_ratio = l / l_d``: the same strain

@@ -28,7 +28,8 @@ def scale_rates(action, scale, value, lo, hi, dt, out):
 
     Clips ``action`` to [-1, 1] in place, then writes ``out = scale * action``, each rate cut
     so that ``value + dt * out`` stays in ``[lo, hi]`` (a rate that would cross a bound lands
-    on it; at the bound an outward rate is zero). ``action``, ``value``, ``out``: (n,) float64.
+    on it; at the bound an outward rate is zero). ``action``, ``value``, ``out``: (n,) float64;
+    ``out`` may be ``value``.
 
     Returns:
         The squared norm of the clipped action, or NaN if an entry of ``action`` is not finite

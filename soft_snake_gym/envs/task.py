@@ -367,7 +367,10 @@ def robot_step(s, t):
     if int(tp[T_KIND]) == SWIM:
         sq = observe.scale_rates(act, tp[T_SCALE], kbar, tp[T_LO], tp[T_HI], dt, uk)
     else:
-        sq = observe.scale_rates(act, tp[T_SCALE], lbar, tp[T_LO], tp[T_HI], dt, ul)
+        # with the actuators' lag tau the rest length coasts on: lbar + tau lbar_dot moves at exactly
+        # the commanded rate, so bounding it (not lbar) keeps lbar itself within the limits
+        ul[:] = lbar + prm[L.P_LAG] * s.buf[L.B_LRATE, : lbar.size]
+        sq = observe.scale_rates(act, tp[T_SCALE], ul, tp[T_LO], tp[T_HI], dt, ul)
     if sq != sq:
         return BAD_ACTION
     ground = int(prm[L.P_MEDIUM]) == L.MEDIUM_GROUND

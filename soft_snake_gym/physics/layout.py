@@ -41,7 +41,8 @@ P_ADDED_MASS = 22  # ADDED_MASS_* code
 
 P_ANISO, P_MU_FWD, P_MU_BWD, P_MU_LAT = 23, 24, 25, 26  # anisotropic kinetic friction
 P_CHORD = 27  # Integrator.newton_chord_rate
-N_PRM = 28
+P_LAG = 28  # Rod.length_lag [s]
+N_PRM = 29
 
 ADDED_MASS_CONSISTENT, ADDED_MASS_KELASIDI = 0, 1
 
@@ -50,11 +51,14 @@ METHOD_BACKWARD_EULER, METHOD_SYMPLECTIC_EULER, METHOD_SDIRK2 = 0, 1, 2
 
 # --- scratch rows ----------------------------------------------------------------------------
 B_R, B_DV, B_F, B_Q0, B_V0, B_VACC, B_M, B_FEXT, B_KEYS, B_A, B_P0, B_VSTEP = range(12)
-N_BUF = 12
+# state, not scratch: the rest-length rates the length actuators have reached (the first N-1
+# entries; Rod.length_lag), kept between steps and zeroed by Simulator.reset
+B_LRATE = 12
+N_BUF = 13
 I_PIV, I_ORDER, I_FRICTION, I_SWITCHES = 0, 1, 2, 3
 N_IBUF = 4
 SLIDING, STUCK = 0, 1
-MAX_SWITCHES = 2  # contact changes per node and step: bounds the active-set passes
+MAX_SWITCHES = 3  # contact changes per node and step: bounds the active-set passes
 
 # --- diagnostics -----------------------------------------------------------------------------
 (

@@ -69,6 +69,7 @@ def pack_params(config: SimConfig, prm: np.ndarray) -> None:
     prm[L.P_EI] = rod.EI
     prm[L.P_DBEND] = rod.damping_bend
     prm[L.P_DSTRETCH] = rod.damping_stretch
+    prm[L.P_LAG] = rod.length_lag
     prm[L.P_RHO] = fl.rho
     prm[L.P_CF] = fl.C_f
     prm[L.P_CD] = fl.C_D
@@ -233,6 +234,7 @@ class Simulator:
         self.arrays.v[:] = 0.0
         self.arrays.out[:] = 0.0
         self.arrays.buf[L.B_FEXT] = 0.0
+        self.arrays.buf[L.B_LRATE] = 0.0
         self.set_state(x=x, v=v, kbar=kbar, lbar=lbar)
 
     def set_state(self, x=None, v=None, kbar=None, lbar=None) -> None:
@@ -340,6 +342,15 @@ class Simulator:
     def lbar(self) -> np.ndarray:
         """Rest lengths, (N-1,) [m] (a copy)."""
         return self.arrays.lbar.copy()
+
+    @property
+    def lbar_dot(self) -> np.ndarray:
+        """Rates of the rest lengths, (N-1,) [m/s] (a copy).
+
+        The inputs ``u_l`` seen through the length actuators' lag ``Rod.length_lag`` (equal to
+        the last inputs without lag).
+        """
+        return self.arrays.buf[L.B_LRATE, : self.N - 1].copy()
 
     @property
     def kappa(self) -> np.ndarray:

@@ -35,6 +35,7 @@ from soft_snake_gym.physics.layout import (
     B_F,
     B_FEXT,
     B_KEYS,
+    B_LRATE,
     B_M,
     B_P0,
     B_Q0,
@@ -86,6 +87,7 @@ from soft_snake_gym.physics.layout import (
     P_DSTRETCH,
     P_G,
     P_H,
+    P_LAG,
     P_MAXIT,
     P_MAXSTRAIN,
     P_MEDIUM,
@@ -514,13 +516,22 @@ def ledger_energies(s):
 
 
 @njit(cache=True, error_model="numpy")
-def _move_rest_shape(kbar, lbar, u_k, u_l, dt):
-    """Advance the rest shape by ``dt`` of the inputs; ``BAD_REST_LENGTH`` if a rest length ends <= 0."""
+def _move_rest_shape(kbar, lbar, lrate, u_k, u_l, dt, tau):
+    """Advance the rest shape by ``dt``; ``BAD_REST_LENGTH`` if a rest length ends <= 0.
+
+    The curvatures move at ``u_k``. The lengths move at the actuators' rates ``lrate``, which
+    follow ``u_l`` with the lag ``tau`` (docs/model.md §3), integrated exactly:
+    ``lrate(t) = u_l + (lrate_0 - u_l) exp(-t/tau)``, so ``lbar`` gains ``dt u_l + (lrate_0 - u_l)
+    tau (1 - exp(-dt/tau))``. With ``tau = 0`` the rates equal ``u_l`` and ``lbar`` gains ``dt u_l``.
+    """
     for j in range(kbar.size):
         kbar[j] += dt * u_k[j]
+    decay = math.exp(-dt / tau) if tau > 0.0 else 0.0
+    carry = tau * (1.0 - decay)
     status = OK
     for k in range(lbar.size):
-        lbar[k] += dt * u_l[k]
+        lbar[k] += dt * u_l[k] + (lrate[k] - u_l[k]) * carry
+        lrate[k] = u_l[k] + (lrate[k] - u_l[k]) * decay
         if not lbar[k] > 0.0:
             status = BAD_REST_LENGTH
     return status
@@ -536,10 +547,12 @@ def _sdirk2_substep(s, dt, medium, u_k, u_l, damped):
     friction energy, actuator work) [J].
     """
     q, v, kbar, lbar, prm, buf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf
+    lrate = buf[B_LRATE, : lbar.size]
     e_fluid = e_damp = e_fric = e_act = 0.0
     status, iters, res = OK, 0, 0.0
     for stage in range(2):
-        status = _move_rest_shape(kbar, lbar, u_k, u_l, (GAMMA if stage == 0 else 1.0 - GAMMA) * dt)
+        stage_dt = (GAMMA if stage == 0 else 1.0 - GAMMA) * dt
+        status = _move_rest_shape(kbar, lbar, lrate, u_k, u_l, stage_dt, prm[P_LAG])
         if status != OK:
             break
         if stage == 0:
@@ -552,7 +565,7 @@ def _sdirk2_substep(s, dt, medium, u_k, u_l, damped):
         w = (1.0 - GAMMA if stage == 0 else GAMMA) * dt
         e_fluid += w * p_fluid
         e_fric += w * p_fric
-        e_act += w * actuator_power(q, kbar, lbar, u_k, u_l, prm)
+        e_act += w * actuator_power(q, kbar, lbar, u_k, lrate, prm)
         if damped:
             e_damp += w * damping_power(q, v, prm)
         if status != OK:
@@ -564,15 +577,17 @@ def _sdirk2_substep(s, dt, medium, u_k, u_l, damped):
 def simulate(s, u_k, u_l, n_steps):
     """Advance one robot by ``n_steps`` steps of ``h`` with inputs held constant; stops at the first failure.
 
-    Per step: rest shape moves by ``dt u`` each sub-step, the state follows by the chosen
-    integrator, then the state is checked.
+    Per step: rest shape moves by ``dt u`` each sub-step (the lengths through the actuators'
+    lag, :func:`_move_rest_shape`), the state follows by the chosen integrator, then the state
+    is checked.
 
     Args:
         s: the robot's :class:`~soft_snake_gym.physics.layout.SimArrays` (or, from Python, the
             plain tuple of its arrays: see ``layout``), advanced in place; diagnostics go into
             ``s.out`` (the energies of :func:`ledger_energies` once, at the end).
         u_k: curvature rates, (N-2,) [1/s].
-        u_l: rest-length rates, (N-1,) [m/s].
+        u_l: commanded rest-length rates, (N-1,) [m/s]; the lengths follow them through
+            ``Rod.length_lag``.
         n_steps: steps of ``h``.
 
     Returns:
@@ -587,8 +602,12 @@ def simulate(s, u_k, u_l, n_steps):
     symplectic = int(prm[P_METHOD]) == METHOD_SYMPLECTIC_EULER
     sdirk2 = int(prm[P_METHOD]) == METHOD_SDIRK2
     damped = prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0
+    tau = prm[P_LAG]
+    lrate = buf[B_LRATE, : lbar.size]  # the length actuators' rates (docs/model.md §3)
     status = OK
     for _ in range(n_steps):
+        if tau == 0.0:
+            lrate[:] = u_l  # no lag: the rates jump to the inputs
         e_fluid = 0.0
         e_fric = 0.0
         e_act = 0.0
@@ -602,21 +621,21 @@ def simulate(s, u_k, u_l, n_steps):
                 # the inputs' work over the sub-step by the trapezoidal rule on P_act: exact for
                 # a body that lags the rest shape and for one that follows it at once, where a
                 # one-point rule charges inputs that reverse every step with work never done
-                p_act0 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
-                status = _move_rest_shape(kbar, lbar, u_k, u_l, dt)
+                p_act0 = actuator_power(q, kbar, lbar, u_k, lrate, prm)
+                status = _move_rest_shape(kbar, lbar, lrate, u_k, u_l, dt, tau)
                 if status != OK:
                     break
                 # each power where the step evaluates its forces: start (explicit) or end (implicit)
                 p_damp = 0.0
                 it, res = 0, 0.0
                 if symplectic:
-                    p_act1 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+                    p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm)
                     if damped:
                         p_damp = damping_power(q, v, prm)
                     p_fluid, p_fric = _symplectic_substep(s, dt, medium)
                 else:
                     status, it, res, p_fluid, p_fric = _be_substep(s, dt, medium, 1.0)
-                    p_act1 = actuator_power(q, kbar, lbar, u_k, u_l, prm)
+                    p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm)
                     if damped:
                         p_damp = damping_power(q, v, prm)
                 ef, ed, efr, ea = dt * p_fluid, dt * p_damp, dt * p_fric, 0.5 * dt * (p_act0 + p_act1)
