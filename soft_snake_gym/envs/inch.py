@@ -239,5 +239,5 @@ class InchEnv(SoftRobotEnv):
         return {
             "edge_lengths": raw[..., :m].copy(),
             "lbar": shape,
-            "stuck": raw[..., 3 * m : 4 * m + 1] > 0.5,
+            "stuck": raw[..., 3 * m : 4 * m + 1].astype(bool),  # exactly 0 or 1: half the time of "> 0.5"
         }

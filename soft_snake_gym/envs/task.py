@@ -207,7 +207,8 @@ def reward_terms(r: Any, keys: tuple[str, ...] = TERM_KEYS) -> dict[str, Any]:
     :data:`TERM_KEYS`, followed by :data:`NAV_TERM_KEYS` in a navigation task.
     """
     terms = {"forward_speed": r[R_FWD]}
-    terms.update(zip(keys, r[R_RF : R_RF + len(keys)], strict=True))
+    # not strict: the slice is cut to the keys' length (the check cost a third of the call)
+    terms.update(zip(keys, r[R_RF : R_RF + len(keys)], strict=False))
     return terms
 
 
@@ -216,7 +217,7 @@ def episode_metrics(r: Any, keys: tuple[str, ...]) -> dict[str, Any]:
 
     ``keys`` are :data:`METRIC_KEYS` with the medium's energy named.
     """
-    return dict(zip(keys, r[M_AVG : M_AVG + len(keys)], strict=True))
+    return dict(zip(keys, r[M_AVG : M_AVG + len(keys)], strict=False))  # not strict: as above
 
 
 @njit(cache=True, error_model="numpy")

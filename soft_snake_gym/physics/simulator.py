@@ -440,7 +440,7 @@ class Simulator:
         Work of :meth:`set_external_force` forces is not counted (it shows up in ``error``).
         """
         return dict(
-            zip(L.LEDGER_KEYS, self.arrays.out[L.O_LEDGER : L.O_LEDGER + L.N_LEDGER].tolist(), strict=True)
+            zip(L.LEDGER_KEYS, self.arrays.out[L.O_LEDGER : L.O_LEDGER + L.N_LEDGER].tolist(), strict=False)
         )
 
     def elastic_forces(self) -> np.ndarray:
