@@ -65,6 +65,12 @@ def test_length_actuators_follow_the_inputs_through_an_exact_first_order_lag(sub
     np.testing.assert_allclose(sim.lbar_dot, rate * np.exp(-sim.h / tau), rtol=1e-12)
     sim.reset()
     assert np.all(sim.lbar_dot == 0.0) and np.all(sim.lbar == 0.18)
+    sim.set_state(lbar_dot=u)  # the lag's state, as for restoring a saved one
+    assert sim.step(u_l=u)
+    np.testing.assert_array_equal(sim.lbar_dot, u)
+    np.testing.assert_allclose(sim.lbar, 0.18 + sim.h * u, rtol=1e-14)
+    with pytest.raises(ValueError, match=r"lbar_dot has shape \(8,\); expected \(9,\)"):
+        sim.set_state(lbar_dot=np.zeros(8))
     # without lag the rates are the inputs at once
     sim = Simulator(SimConfig(medium="ground", rod=Rod(length_lag=0.0)))
     assert sim.step(u_l=u)

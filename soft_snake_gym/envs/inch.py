@@ -63,14 +63,14 @@ class InchEnv(SoftRobotEnv):
     through the length actuators' first-order lag ``Rod.length_lag`` (default 0.05 s;
     ``tau d(lbar_dot)/dt = u_l - lbar_dot``, docs/model.md §3), so ``lbar`` moves smoothly and
     ``lbar_dot`` approaches ``u_l`` within about 3 tau; the edge length rates observed follow
-    ``lbar_dot`` closely (stretching is stiff). Actions outside [-1, 1]
-    are clipped; a NaN or a wrong shape raises ``ValueError``. A rate that would carry
-    ``lbar`` outside ``rest_length_limits`` (fractions of the edge length) is cut so that
-    ``lbar`` stops at the bound (early enough that the lag does not carry it past). The default ``max_length_rate = 0.3`` m/s covers the inching
-    wave's peak rate ``0.5 l0 eps omega = 0.17`` m/s at eps = 0.3, omega = 2 pi, with room
-    for feedback. On a refined rod (``rod={"refine": N}``) ``max_length_rate`` (as given,
-    that of the robot as designed) is scaled by ``Rod.edge_ratio = l / l_d``: the same strain
-    rate at action 1.0 whatever N.
+    ``lbar_dot`` closely (stretching is stiff). Actions outside [-1, 1] are clipped; a NaN or a
+    wrong shape raises ``ValueError``. A rate that would carry ``lbar`` outside
+    ``rest_length_limits`` (fractions of the edge length) is cut so that ``lbar`` stops at the
+    bound (early enough that the lag does not carry it past). The default
+    ``max_length_rate = 0.3`` m/s covers the inching wave's peak rate ``0.5 l0 eps omega =
+    0.17`` m/s at eps = 0.3, omega = 2 pi, with room for feedback. On a refined rod
+    (``rod={"refine": N}``) ``max_length_rate`` (as given, that of the robot as designed) is
+    scaled by ``Rod.edge_ratio = l / l_d``: the same strain rate at action 1.0 whatever N.
 
     ## Observation Space
     A `Box(low, high, (4N-1,), float32)` in this order (``observation_structure``); values

@@ -237,13 +237,17 @@ class Simulator:
         self.arrays.buf[L.B_LRATE] = 0.0
         self.set_state(x=x, v=v, kbar=kbar, lbar=lbar)
 
-    def set_state(self, x=None, v=None, kbar=None, lbar=None) -> None:
-        """Overwrite any part of the state; the others are kept. Clears a failure."""
+    def set_state(self, x=None, v=None, kbar=None, lbar=None, lbar_dot=None) -> None:
+        """Overwrite any part of the state; the others are kept. Clears a failure.
+
+        ``lbar_dot`` (N-1,) [m/s] sets the length actuators' rates (the state of their lag).
+        """
         N = self.N
         new_x = None if x is None else _as_array("x", x, (N, 2))
         new_v = None if v is None else _as_array("v", v, (N, 2))
         new_k = None if kbar is None else _as_array("kbar", kbar, (N - 2,))
         new_l = None if lbar is None else _as_array("lbar", lbar, (N - 1,))
+        new_ldot = None if lbar_dot is None else _as_array("lbar_dot", lbar_dot, (N - 1,))
         if new_l is not None and np.any(new_l <= 0):
             raise ValueError(f"lbar must be positive, got min {new_l.min()!r}")
         if new_x is not None:
@@ -260,6 +264,8 @@ class Simulator:
             self.arrays.kbar[:] = new_k
         if new_l is not None:
             self.arrays.lbar[:] = new_l
+        if new_ldot is not None:
+            self.arrays.buf[L.B_LRATE, : N - 1] = new_ldot
         self.arrays.ibuf[L.I_ORDER, : N - 1] = np.argsort(
             np.minimum(self.arrays.q[0:-2:2], self.arrays.q[2::2]), kind="stable"
         )
