@@ -57,7 +57,8 @@ def test_run_folder_holds_everything_needed_to_reproduce(trained_run):
     cfg = load_train_config("SoftEel-v0", path=run / "config.yaml")
     assert isinstance(cfg, TrainConfig) and cfg.n_timesteps == 256 and cfg.n_envs == 2
     assert cfg.hyperparams["n_steps"] == 64 and cfg.env_kwargs == {"max_episode_steps": 100}
-    assert "train SoftEel-v0 --n-timesteps 256" in (run / "command.txt").read_text()
+    # as a user types it: no path of this machine (the run went through python -m soft_snake_gym.cli)
+    assert (run / "command.txt").read_text().startswith("soft-snake train SoftEel-v0 --n-timesteps 256")
     meta = json.loads((run / "meta.json").read_text())
     assert meta["soft_snake_gym"] and "git_commit" in meta and meta["stable_baselines3"]
     with open(run / "learning_curve.csv") as fh:

@@ -172,6 +172,22 @@ def _is_new_stage(cfg: TrainConfig, run_dir: Path) -> bool:
     return path.is_file() and settings(load_yaml(path)) != settings(cfg.to_yaml_dict())
 
 
+def _command_line(command: list[str] | None) -> str:
+    """The command that started the run (default ``sys.argv``), as a user types it.
+
+    The CLI's own path (the ``soft-snake`` console script, or ``soft_snake_gym/cli/__main__.py``
+    under ``python -m soft_snake_gym.cli``) is recorded as ``soft-snake``, so that a run folder
+    (and a shipped agent's ``command.txt``) names no path of the machine that trained it.
+    """
+    argv = list(sys.argv if command is None else command)
+    if argv and (
+        Path(argv[0]).name == "soft-snake"
+        or Path(argv[0]).parts[-3:] == ("soft_snake_gym", "cli", "__main__.py")
+    ):
+        argv[0] = "soft-snake"
+    return shlex.join(argv)
+
+
 def _record_resume(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -> bool:
     """Append the resuming command to command.txt.
 
@@ -187,7 +203,7 @@ def _record_resume(cfg: TrainConfig, run_dir: Path, command: list[str] | None) -
         path.rename(run_dir / f"config.{k}.yaml")
     path.write_text(yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False))
     with open(run_dir / "command.txt", "a") as fh:
-        fh.write(shlex.join(command if command is not None else sys.argv) + "\n")
+        fh.write(_command_line(command) + "\n")
     return new_stage
 
 
@@ -250,7 +266,7 @@ def _write_run_files(cfg: TrainConfig, run_dir: Path, command: list[str] | None)
 
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.yaml").write_text(yaml.safe_dump(cfg.to_yaml_dict(), sort_keys=False))
-    (run_dir / "command.txt").write_text(shlex.join(command if command is not None else sys.argv) + "\n")
+    (run_dir / "command.txt").write_text(_command_line(command) + "\n")
     meta = {
         "soft_snake_gym": soft_snake_gym.__version__,
         "git_commit": _git_commit(),
