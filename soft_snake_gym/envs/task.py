@@ -370,7 +370,9 @@ def robot_step(s, t):
     else:
         # with the actuators' lag tau the rest length coasts on: lbar + tau lbar_dot moves at exactly
         # the commanded rate, so bounding it (not lbar) keeps lbar itself within the limits
-        ul[:] = lbar + prm[L.P_LAG] * s.buf[L.B_LRATE, : lbar.size]
+        lrate = s.buf[L.B_LRATE]
+        for k in range(lbar.size):
+            ul[k] = lbar[k] + prm[L.P_LAG] * lrate[k]
         sq = observe.scale_rates(act, tp[T_SCALE], ul, tp[T_LO], tp[T_HI], dt, ul)
     if sq != sq:
         return BAD_ACTION

@@ -604,10 +604,10 @@ def simulate(s, u_k, u_l, n_steps):
     damped = prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0
     tau = prm[P_LAG]
     lrate = buf[B_LRATE, : lbar.size]  # the length actuators' rates (docs/model.md §3)
+    if tau == 0.0:
+        lrate[:] = u_l  # no lag: the rates jump to the inputs (and _move_rest_shape keeps them there)
     status = OK
     for _ in range(n_steps):
-        if tau == 0.0:
-            lrate[:] = u_l  # no lag: the rates jump to the inputs
         e_fluid = 0.0
         e_fric = 0.0
         e_act = 0.0
