@@ -58,7 +58,7 @@ N_BUF = 13
 I_PIV, I_ORDER, I_FRICTION, I_SWITCHES = 0, 1, 2, 3
 N_IBUF = 4
 SLIDING, STUCK = 0, 1
-MAX_SWITCHES = 3  # contact changes per node and step: bounds the active-set passes
+MAX_SWITCHES = 5  # contact changes per node and step (sticks and releases): bounds the passes
 
 # --- diagnostics -----------------------------------------------------------------------------
 (

@@ -231,19 +231,49 @@ def _stick_slow_nodes(v, ibuf, prm, n):
 
 
 @njit(cache=True, error_model="numpy")
+def _stick_reversing_nodes(v, dv, ahead, v0, ibuf, n):
+    """Stick every node sliding since the step began that ``v + ahead dv`` turns back; True if any did.
+
+    Kinetic friction brakes a sliding node; it cannot push it back. A node whose velocity
+    would end the step against its start velocity ``v0`` passed through rest within the step,
+    where the law holds it unless the force exceeds ``mu_s F_N``: it is held at rest, and
+    :func:`_update_contacts` releases it at the end of the pass if its holding force exceeds
+    ``mu_s F_N``. Only nodes that have not changed in this step are tested (a released node
+    may move against ``v0``). ``ahead`` is 1 to test a Newton update ``dv`` before it is
+    taken, 0 to test the converged velocity.
+    """
+    state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
+    stuck_any = False
+    for i in range(n // 2):
+        r0, r1 = 2 * i, 2 * i + 1
+        if (
+            state[i] == SLIDING
+            and switches[i] == 0
+            and (v[r0] + ahead * dv[r0]) * v0[r0] + (v[r1] + ahead * dv[r1]) * v0[r1] < 0.0
+        ):
+            state[i] = STUCK
+            switches[i] += 1
+            v[r0] = 0.0
+            v[r1] = 0.0
+            stuck_any = True
+    return stuck_any
+
+
+@njit(cache=True, error_model="numpy")
 def _update_contacts(v, buf, ibuf, prm, dt, n):
     """Make stick-slip consistent with the end of a converged step (docs/model.md §5).
 
     True if a node changed and the step must be solved again.
 
-    Sliding nodes that end slower than ``V_tol`` stick. Otherwise every stuck node whose
+    Sliding nodes that end slower than ``V_tol``, or against their start velocity
+    (:func:`_stick_reversing_nodes`), stick. Otherwise every stuck node whose
     holding force ``f = -m v0/dt - F`` (``F``: every other force, at the end of the step)
     exceeds ``mu_s F_N`` is released to slide, with a first guess along its push (releasing
     them one at a time, worst first, gave the same gaits to 1e-4 in more passes). A node
     released too eagerly ends slow and sticks again in the next pass. Each node changes at
     most ``MAX_SWITCHES`` times per step, so the passes end.
     """
-    if _stick_slow_nodes(v, ibuf, prm, n):
+    if _stick_slow_nodes(v, ibuf, prm, n) | _stick_reversing_nodes(v, v, 0.0, buf[B_V0], ibuf, n):
         return True
     F, m, v0 = buf[B_F], buf[B_M], buf[B_V0]
     state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
@@ -393,16 +423,23 @@ def _be_newton(s, dt, medium):
             vacc[i] = v[i]
             dv[i] = -R[i]
         band_solve(J, piv, n, dv)
+        if fused and _stick_reversing_nodes(v, dv, 1.0, buf[B_V0], ibuf, n):
+            norm2, rmax, p_fluid, p_fric = _be_residual(s, dt, medium, True)
+            factored = False
+            pass_it = 0
+            continue
         # backtracking line search on |R|^2. Off the ground most steps converge in one or two
         # iterations, so trials skip the Jacobian; a chord step (the factors of an earlier
         # Jacobian) that does not descend at full length is not searched: the Jacobian is
         # renewed. On the ground a contact pass takes several iterations, so the full step's
-        # trial assembles the Jacobian too and, accepted, serves the next iteration
+        # trial assembles the Jacobian too and, accepted, serves the next iteration; not once
+        # rmax^2 <= tol, where Newton's quadratic convergence makes it the pass's last iterate
         step = 1.0
+        renew = fused and rmax * rmax > tol
         for _ in range(12):
             for i in range(n):
                 v[i] = vacc[i] + step * dv[i]
-            trial = _be_residual(s, dt, medium, fused and step == 1.0)
+            trial = _be_residual(s, dt, medium, renew and step == 1.0)
             if trial[0] < norm2 * (1.0 - 1e-4 * step) or chord:
                 break
             step *= 0.5
@@ -426,7 +463,7 @@ def _be_newton(s, dt, medium):
             rmax > tol
             and pass_it < maxit
             and math.isfinite(norm2)
-            and not (fused and step == 1.0)
+            and not (renew and step == 1.0)
             and not (not fused and step == 1.0 and rmax <= chord_rate * rmax_prev)
         ):
             # the next iteration renews the Jacobian, at the accepted velocity (the residual is
