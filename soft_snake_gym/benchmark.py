@@ -76,6 +76,7 @@ class _SingleCase:
         self.env.reset(seed=0)
         rng = np.random.default_rng(0)
         self.actions = rng.uniform(-1, 1, (1000,) + self.env.action_space.shape).astype(np.float32)
+        self.next = 0  # the next action: the rounds go on through all of them, 100 at a time
         self.robots = 1
         self.dt = float(self.env.unwrapped.dt)
 
@@ -83,10 +84,11 @@ class _SingleCase:
         env, steps = self.env, 0
         start = time.perf_counter()
         while True:
-            for a in self.actions[:100]:
+            for a in self.actions[self.next : self.next + 100]:
                 _, _, term, trunc, _ = env.step(a)
                 if term or trunc:
                     env.reset()
+            self.next = (self.next + 100) % len(self.actions)
             steps += 100
             elapsed = time.perf_counter() - start
             if elapsed >= seconds:
