@@ -114,6 +114,10 @@ def _check_int(owner: object, name: str, lo: int, hi: int | None = None) -> None
         object.__setattr__(owner, name, number)
 
 
+#: the longest length-actuator lag ``Rod.length_lag`` takes [s]
+LENGTH_LAG_MAX = 10.0
+
+
 @dataclass(frozen=True)
 class Rod:
     """The soft body: N nodes, N-1 edges of elliptic cross-section (docs/model.md §3, §9).
@@ -200,7 +204,7 @@ class Rod:
             _check(self, "E_bend", 0.0, None, lo_open=True)
         _check(self, "damping_bend", 0.0, None)
         _check(self, "damping_stretch", 0.0, None)
-        _check(self, "length_lag", 0.0, 10.0)
+        _check(self, "length_lag", 0.0, LENGTH_LAG_MAX)
         if self.refined_from is not None:
             _check_int(self, "refined_from", 3, 100_000)
         if refine is not None:

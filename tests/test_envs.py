@@ -486,6 +486,27 @@ def test_randomization_draws_physics_per_episode_and_reports_it():
     assert gym.make("SoftEel-v0").reset(seed=0)[1]["randomized"] == {}
 
 
+def test_a_randomized_length_lag_reaches_the_length_actuators():
+    """The drawn lag is the one the actuators follow.
+
+    From rest, a commanded rate u gives ``lbar_dot = u (1 - exp(-h/tau))`` after one step
+    (docs/model.md §3).
+    """
+    env = gym.make("SoftWorm-v0", randomize={"length_lag": [0.02, 0.2]}, reset_noise_scale=0.0)
+    sim = env.unwrapped.sim
+    taus = []
+    for seed in (0, 1):
+        tau = env.reset(seed=seed)[1]["randomized"]["length_lag"]
+        assert 0.02 <= tau <= 0.2 and sim.config.rod.length_lag == tau
+        action = np.zeros(env.action_space.shape, dtype=np.float32)
+        action[0] = 1.0  # the first edge at max_length_rate (0.3 m/s), the others held
+        env.step(action)
+        assert sim.lbar_dot[0] == pytest.approx(0.3 * (1.0 - math.exp(-sim.h / tau)), rel=1e-12)
+        np.testing.assert_array_equal(sim.lbar_dot[1:], 0.0)
+        taus.append(tau)
+    assert taus[0] != taus[1]
+
+
 # --- configuration ---------------------------------------------------------------------------
 def test_yaml_configs_hold_the_defaults_and_keywords_override_them():
     eel = gym.make("SoftEel-v0", config="softeel").unwrapped  # a config shipped in the package, by name

@@ -190,6 +190,13 @@ def test_randomizing_what_the_medium_ignores_is_rejected(env_id, key, unused):
         gym.make(env_id, randomize={"E": [1e6, 2e6], key: [0.5, 0.6]})
 
 
+def test_randomized_length_lag_is_checked_before_any_episode():
+    with pytest.raises(ConfigError, match=r"SoftEel-v0.randomize: length_lag has no effect in the water"):
+        gym.make("SoftEel-v0", randomize={"length_lag": [0.01, 0.1]})
+    with pytest.raises(ConfigError, match=r"length_lag = \[0.0, 20.0\] reaches past .* \[0, 10\] s"):
+        gym.make("SoftWorm-v0", randomize={"length_lag": [0.0, 20.0]})
+
+
 def test_symplectic_with_tens_of_thousands_of_substeps_warns():
     with pytest.warns(UserWarning, match=r"symplectic_euler' takes [\d,]+ sub-steps per h = 0.01 s"):
         gym.make(

@@ -149,7 +149,7 @@ class InchEnv(SoftRobotEnv):
     | `reset_noise_scale`   | float             | `0.01`         | `s` of the Starting State                                                   |
     | `goal_direction`      | float             | `0.0`          | goal direction (rad from +x)                                                |
     | `max_observed_speed`  | float             | `2.0`          | bound of `com_velocity_body` (m/s)                                          |
-    | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping_bend, damping_stretch, mu_s, mu_d (every mu_d draw <= every mu_s draw; not the fluid's) |
+    | `randomize`           | dict or `Randomization` | off      | ranges `[low, high]` for E, E_bend, damping_bend, damping_stretch, length_lag, mu_s, mu_d (every mu_d draw <= every mu_s draw; not the fluid's) |
 
     ## Attributes
     Those of :class:`~soft_snake_gym.envs.base.SoftRobotEnv` (``sim``, ``task``, ``dt``, ``N``,

@@ -15,7 +15,16 @@ from typing import Any, ClassVar
 import numpy as np
 
 from soft_snake_gym.config import ConfigError, config_path, from_dict, load_yaml, with_preset
-from soft_snake_gym.params import Fluid, Ground, Integrator, Rod, SimConfig, check_number, plain_number
+from soft_snake_gym.params import (
+    LENGTH_LAG_MAX,
+    Fluid,
+    Ground,
+    Integrator,
+    Rod,
+    SimConfig,
+    check_number,
+    plain_number,
+)
 
 __all__ = ["BaseSettings", "Randomization", "resolve_settings"]
 
@@ -27,7 +36,8 @@ class Randomization:
     Each field is ``None`` (not randomized) or a range ``[low, high]`` from which the value is drawn
     uniformly at every ``reset``.
 
-    Fields map onto :class:`~soft_snake_gym.params.Rod` (``E``, ``E_bend``, ``damping_bend``, ``damping_stretch``),
+    Fields map onto :class:`~soft_snake_gym.params.Rod` (``E``, ``E_bend``, ``damping_bend``, ``damping_stretch``,
+    ``length_lag``: at most 10 s, and only where the env drives rest lengths, on the ground),
     :class:`~soft_snake_gym.params.Fluid` (``rho``, ``C_f``, ``C_D``, ``C_A``) and
     :class:`~soft_snake_gym.params.Ground` (``mu_s``, ``mu_d``). The draws happen in field order
     from ``env.np_random``. The env rejects ranges whose draws could break a constraint of the
@@ -39,6 +49,7 @@ class Randomization:
     E_bend: tuple[float, float] | None = None
     damping_bend: tuple[float, float] | None = None
     damping_stretch: tuple[float, float] | None = None
+    length_lag: tuple[float, float] | None = None
     rho: tuple[float, float] | None = None
     C_f: tuple[float, float] | None = None
     C_D: tuple[float, float] | None = None
@@ -51,6 +62,7 @@ class Randomization:
         "E_bend": "rod",
         "damping_bend": "rod",
         "damping_stretch": "rod",
+        "length_lag": "rod",
         "rho": "fluid",
         "C_f": "fluid",
         "C_D": "fluid",
@@ -81,6 +93,11 @@ class Randomization:
                 allowed = "0 < low <= high" if positive else "0 <= low <= high"
                 raise ValueError(
                     f"Randomization.{f.name} = {list(rng)!r} is not a valid range: need {allowed}"
+                )
+            if f.name == "length_lag" and hi > LENGTH_LAG_MAX:
+                raise ValueError(
+                    f"Randomization.length_lag = {list(rng)!r} reaches past Rod.length_lag's range "
+                    f"[0, {LENGTH_LAG_MAX:g}] s; keep high <= {LENGTH_LAG_MAX:g}"
                 )
 
     @property
@@ -124,6 +141,11 @@ class Randomization:
                 f"{where}.randomize: {', '.join(useless)} {'has' if len(useless) == 1 else 'have'} no "
                 f"effect in the {medium} ({unused} parameters); remove "
                 f"{'it' if len(useless) == 1 else 'them'}"
+            )
+        if medium == "water" and self.length_lag is not None:
+            raise ConfigError(
+                f"{where}.randomize: length_lag has no effect in the water (the swimming envs drive "
+                "no rest lengths); remove it"
             )
         if medium != "ground":
             return
