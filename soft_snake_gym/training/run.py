@@ -58,17 +58,27 @@ __all__ = [
 def _signals_held():
     """Ctrl-C and SIGTERM wait until the block ends (a save is never cut in half).
 
-    On platforms without ``pthread_sigmask`` the block runs as is.
+    Their handlers are swapped for one that only notes the signal, which the previous handler
+    then gets when the block ends. Blocking them with ``pthread_sigmask`` was not enough: it
+    holds them off the main thread only, the kernel hands a process's signal to any thread that
+    does not block it (torch's and numba's workers), and Python then runs the handler on the
+    main thread all the same. Outside the main thread (where no handler runs) the block runs as is.
     """
-    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
-    held = {signal.SIGINT, signal.SIGTERM}
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    caught: list[int] = []
+    previous = {
+        s: signal.signal(s, lambda signum, frame: caught.append(signum))
+        for s in (signal.SIGINT, signal.SIGTERM)
+    }
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)  # a held signal is delivered here
+        for s, handler in previous.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+        if caught:
+            signal.raise_signal(caught[0])
 
 
 def save_checkpoint(model, run_dir: Path, started: float | None = None) -> Path:
@@ -96,7 +106,9 @@ def save_checkpoint(model, run_dir: Path, started: float | None = None) -> Path:
         if started is not None:
             walls = _checkpoint_walls(run_dir)
             walls[str(steps)] = round(time.time() - started, 1)
-            (ckdir / "wall_s.json").write_text(json.dumps(walls, indent=1) + "\n")
+            partial_walls = ckdir / "wall_s.partial.json"
+            partial_walls.write_text(json.dumps(walls, indent=1) + "\n")
+            os.replace(partial_walls, ckdir / "wall_s.json")
     return path
 
 
