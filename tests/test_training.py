@@ -141,10 +141,16 @@ def test_a_ctrl_c_that_lands_on_another_thread_waits_for_the_save():
     """A save under ``_signals_held`` finishes before Ctrl-C, whichever thread the kernel hands it to.
 
     The kernel may deliver it to any thread (torch's, numba's); Python still raises it in the
-    main thread, so the interrupt must come after the block. In a fresh interpreter: the test
-    process's handlers and signal masks are whatever earlier tests (Ray's) left.
+    main thread, so the interrupt must come after the block. In a fresh interpreter with SIGINT at
+    its default, as from a terminal (a background job ignores it; see ``cli_in_background``).
     """
-    out = subprocess.run([sys.executable, "-c", _HELD_SAVE], capture_output=True, text=True, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-c", _HELD_SAVE],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     assert out.stdout.strip() == "saved,interrupted", out.stderr
 
 
