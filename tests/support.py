@@ -39,5 +39,10 @@ def cli_in_background(*args: str) -> subprocess.Popen:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        preexec_fn=sigint_at_default,
     )
+
+
+def sigint_at_default() -> None:
+    """A child's ``preexec_fn``: SIGINT at its default, as from a terminal (see :func:`cli_in_background`)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from support import TINY_TRAINING, cli, cli_in_background
+from support import TINY_TRAINING, cli, cli_in_background, sigint_at_default
 
 from soft_snake_gym.cli import main
 from soft_snake_gym.training import TrainConfig, load_train_config
@@ -149,7 +149,7 @@ def test_a_ctrl_c_that_lands_on_another_thread_waits_for_the_save():
         capture_output=True,
         text=True,
         timeout=120,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        preexec_fn=sigint_at_default,
     )
     assert out.stdout.strip() == "saved,interrupted", out.stderr
 
