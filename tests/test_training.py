@@ -181,6 +181,7 @@ def test_ctrl_c_keeps_a_checkpoint_that_resumes(tmp_path):
             "unknown hyperparameter 'gama' for PPO; did you mean 'gamma'",
         ),
         (["train", "SoftEel-v0", "--hyperparams", "learning_rate=lin_3e-4"], "is a string"),
+        (["train", "SoftEel-v0", "--hyperparams", "init_from=5"], "init_from = 5 must be a model zip"),
         (["train", "SoftEel-v0", "--config", "{bad}"], "not valid YAML"),
         (["train", "--resume", "{empty}"], "has no checkpoint"),
         (["evaluate", "SoftEel-v0", "--policy", "runs/nope/model.zip"], "does not exist"),

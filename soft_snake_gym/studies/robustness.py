@@ -229,7 +229,7 @@ def run_experiment(
         + [f"{k}_{s}" for k, _, _ in METRICS for s in ("mean", "std")]
         + ["note"]
     )
-    done = {(r["setting"], r["controller"]): r for r in read_rows(path)}  # an earlier run's cells
+    done = {(r["setting"], r["controller"]) for r in read_rows(path)}  # an earlier run's cells
     with appending(path, fields) as write:
         for label, perturbation, n in rows_spec:
             for c in controllers:

@@ -73,7 +73,7 @@ class TrainConfig:
             (``none`` to skip).
         init_from: start a new run from another agent's weights instead of at random: a model
             zip, a run folder, or ``zoo:<env id>`` (the PPO agent shipped for that id); see
-            :func:`soft_snake_gym.training.train.init_from`. ``""``: at random.
+            :func:`soft_snake_gym.training.train.init_from`. ``""`` (or None): at random.
         imitate: a baseline spec the new agent first imitates before PPO trains it
             (:mod:`soft_snake_gym.training.imitation`; the ``VecNormalize`` statistics are then
             the baseline's and stay fixed); ``none`` (default): start from scratch.
@@ -118,6 +118,13 @@ class TrainConfig:
             if value is None or value < lo:
                 raise ConfigError(f"{name} = {getattr(self, name)!r} must be an integer >= {lo}")
             object.__setattr__(self, name, value)
+        if self.init_from is None:  # YAML null, or an empty ``init_from=``: at random, as ""
+            object.__setattr__(self, "init_from", "")
+        if not isinstance(self.init_from, str):
+            raise ConfigError(
+                f"init_from = {self.init_from!r} must be a model zip, a run folder or zoo:<env id> "
+                "(or empty, to start at random)"
+            )
         if not isinstance(self.imitate, str):
             raise ConfigError(
                 f"imitate = {self.imitate!r} must be a baseline spec (e.g. decentralized) or none"
