@@ -1,0 +1,188 @@
+"""Robots innermost (structure of arrays): does numba vectorize a force kernel across robots?
+
+The first measurement for a structure-of-arrays batched kernel (docs/performance.md, "The
+layout and the vectorizer"). The elastic and damping residual of ``forces.assemble``
+(stretching and bending, no Jacobian, no water) is computed for eels taken from random-action
+episodes in three ways, with the same arithmetic as ``assemble``:
+
+- per robot: ``assemble`` itself, robot by robot (the package's layout);
+- fused: robot index innermost, each loop adding straight into the force rows of the nodes it
+  pushes (two per edge, three per bending node);
+- split: robot index innermost, each loop writing its terms into fixed rows of a scratch
+  array, then adding each into its force row in a loop of its own.
+
+All three must give bitwise the same forces (exit 1 otherwise). Printed: thread CPU time per
+robot, medians over interleaved rounds, and the ratios against ``assemble`` in the same process.
+
+    python scripts/probe_soa.py                      # 32 and 256 robots
+    NUMBA_LOOP_VECTORIZE=0 python scripts/probe_soa.py  # the same with LLVM's loop vectorizer off
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+import time
+
+import gymnasium as gym
+import numpy as np
+from numba import njit
+
+import soft_snake_gym  # noqa: F401 - registers the ids
+from soft_snake_gym.physics import forces
+from soft_snake_gym.physics.layout import P_DBEND, P_DSTRETCH, P_EA, P_EI
+
+
+@njit(cache=True, error_model="numpy")
+def per_robot(q, v, kbar, lbar, prm, F, J, reps):
+    """``assemble``'s internal forces, robot by robot; arrays (robots, ...)."""
+    for _ in range(reps):
+        for r in range(q.shape[0]):
+            F[r, :] = 0.0
+            forces.assemble(q[r], v[r], kbar[r], lbar[r], prm[r], F[r], J[r], 0.0, 0.0, False, False)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _edge_force(q, v, k, r, lb, EA, d):
+    """Stretching force on node k+1 of robot r, as ``assemble`` computes it (q, v: (2N, robots))."""
+    ex = q[2 * k + 2, r] - q[2 * k, r]
+    ey = q[2 * k + 3, r] - q[2 * k + 1, r]
+    l = math.sqrt(ex * ex + ey * ey)
+    tx, ty = ex / l, ey / l
+    f = -EA * (l / lb - 1.0)
+    f -= d * (tx * (v[2 * k + 2, r] - v[2 * k, r]) + ty * (v[2 * k + 3, r] - v[2 * k + 1, r]))
+    return f * tx, f * ty
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _bending_forces(q, v, j, r, l0, l1, kb0, EI, db):
+    """Bending (and its damping) forces on nodes j-1, j, j+1 of robot r, as ``assemble`` computes them."""
+    ax = q[2 * j, r] - q[2 * j - 2, r]
+    ay = q[2 * j + 1, r] - q[2 * j - 1, r]
+    bx = q[2 * j + 2, r] - q[2 * j, r]
+    by = q[2 * j + 3, r] - q[2 * j + 1, r]
+    la = math.sqrt(ax * ax + ay * ay)
+    lb = math.sqrt(bx * bx + by * by)
+    tax, tay = ax / la, ay / la
+    tbx, tby = bx / lb, by / lb
+    kap = 2.0 * (tax * tby - tay * tbx) / (1.0 + (tax * tbx + tay * tby))
+    g0x, g0y = -tay / la, tax / la
+    g2x, g2y = -tby / lb, tbx / lb
+    g1x, g1y = -g0x - g2x, -g0y - g2y
+    w = 1.0 + 0.25 * kap * kap
+    s = EI / (0.5 * (l0 + l1)) * (kap - kb0) * w
+    phidot = (
+        g0x * v[2 * j - 2, r]
+        + g0y * v[2 * j - 1, r]
+        + g1x * v[2 * j, r]
+        + g1y * v[2 * j + 1, r]
+        + g2x * v[2 * j + 2, r]
+        + g2y * v[2 * j + 3, r]
+    )
+    s += db * w * w * phidot
+    return s * g0x, s * g0y, s * g1x, s * g1y, s * g2x, s * g2y
+
+
+@njit(cache=True, error_model="numpy")
+def fused(q, v, kbar, lbar, EA, EI, d, db, F, reps):
+    """Robots innermost; every loop adds into two (edge) or six (bending) rows of F."""
+    n2, R = q.shape
+    for _ in range(reps):
+        F[:, :] = 0.0
+        for k in range(n2 // 2 - 1):
+            for r in range(R):
+                fx, fy = _edge_force(q, v, k, r, lbar[k, r], EA[r], d[r])
+                F[2 * k + 2, r] += fx
+                F[2 * k + 3, r] += fy
+                F[2 * k, r] -= fx
+                F[2 * k + 1, r] -= fy
+        for j in range(1, n2 // 2 - 1):
+            for r in range(R):
+                f0, f1, f2, f3, f4, f5 = _bending_forces(
+                    q, v, j, r, lbar[j - 1, r], lbar[j, r], kbar[j - 1, r], EI[r], db[r]
+                )
+                F[2 * j - 2, r] -= f0
+                F[2 * j - 1, r] -= f1
+                F[2 * j, r] -= f2
+                F[2 * j + 1, r] -= f3
+                F[2 * j + 2, r] -= f4
+                F[2 * j + 3, r] -= f5
+
+
+@njit(cache=True, error_model="numpy")
+def split(q, v, kbar, lbar, EA, EI, d, db, F, reps):
+    """Robots innermost; terms into fixed rows of a scratch array, then one loop per force row."""
+    n2, R = q.shape
+    T = np.empty((6, R))
+    for _ in range(reps):
+        F[:, :] = 0.0
+        for k in range(n2 // 2 - 1):
+            for r in range(R):
+                T[0, r], T[1, r] = _edge_force(q, v, k, r, lbar[k, r], EA[r], d[r])
+            for r in range(R):
+                F[2 * k + 2, r] += T[0, r]
+            for r in range(R):
+                F[2 * k + 3, r] += T[1, r]
+            for r in range(R):
+                F[2 * k, r] -= T[0, r]
+            for r in range(R):
+                F[2 * k + 1, r] -= T[1, r]
+        for j in range(1, n2 // 2 - 1):
+            for r in range(R):
+                T[0, r], T[1, r], T[2, r], T[3, r], T[4, r], T[5, r] = _bending_forces(
+                    q, v, j, r, lbar[j - 1, r], lbar[j, r], kbar[j - 1, r], EI[r], db[r]
+                )
+            for m in range(6):
+                for r in range(R):
+                    F[2 * j - 2 + m, r] -= T[m, r]
+
+
+def probe(robots: int, rounds: int) -> bool:
+    """Print the three variants' times for ``robots`` eels; False if their forces differ."""
+    venv = gym.make_vec("SoftEel-v0", num_envs=robots, num_threads=1)
+    venv.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        venv.step(rng.uniform(-1, 1, venv.action_space.shape))
+    sim = venv.batch.sim
+    q, v, kbar, lbar, prm, J = (np.array(a) for a in (sim.q, sim.v, sim.kbar, sim.lbar, sim.prm, sim.J))
+    prm[:, P_DSTRETCH] = 0.5  # stretching damping on too, so that every term is timed
+    cols = [np.ascontiguousarray(a.T) for a in (q, v, kbar, lbar)]
+    params = [np.ascontiguousarray(prm[:, i]) for i in (P_EA, P_EI, P_DSTRETCH, P_DBEND)]
+    F_ref, F_fused, F_split = np.zeros_like(q), np.zeros_like(cols[0]), np.zeros_like(cols[0])
+    runs = {
+        "per robot (assemble)": lambda n: per_robot(q, v, kbar, lbar, prm, F_ref, J, n),
+        "fused": lambda n: fused(*cols, *params, F_fused, n),
+        "split": lambda n: split(*cols, *params, F_split, n),
+    }
+    for run in runs.values():
+        run(1)
+    same = np.array_equal(F_ref, F_fused.T) and np.array_equal(F_ref, F_split.T)
+    reps = max(1, 100_000 // robots)
+    times: dict[str, list[float]] = {name: [] for name in runs}
+    for _ in range(rounds):
+        for name, run in runs.items():
+            start = time.thread_time()
+            run(reps)
+            times[name].append((time.thread_time() - start) / (reps * robots) * 1e9)
+    ref = statistics.median(times["per robot (assemble)"])
+    print(f"{robots} eels, forces bitwise equal: {same}")
+    for name, t in times.items():
+        print(f"  {name:<22} {statistics.median(t):7.0f} ns per robot  {ref / statistics.median(t):5.2f}x")
+    return same
+
+
+def main() -> int:
+    """Probe each robot count; exit 1 if any variant's forces differ from ``assemble``'s."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", type=int, nargs="+", default=[32, 256])
+    parser.add_argument("--rounds", type=int, default=11, help="interleaved rounds (medians)")
+    args = parser.parse_args()
+    ok = [probe(n, args.rounds) for n in args.robots]
+    return 0 if all(ok) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
