@@ -11,8 +11,14 @@ episodes in three ways, with the same arithmetic as ``assemble``:
 - split: robot index innermost, each loop writing its terms into fixed rows of a scratch
   array, then adding each into its force row in a loop of its own.
 
-All three must give bitwise the same forces (exit 1 otherwise). Printed: thread CPU time per
-robot, medians over interleaved rounds, and the ratios against ``assemble`` in the same process.
+Then the Newton step's linear algebra: each robot's backward-Euler Jacobian (water, h = 0.01 s)
+factored and solved by ``band_factor`` and ``band_solve``, robot by robot, and with the robot
+index innermost without row exchanges (a robot that would need one is flagged, to be redone
+robot by robot).
+
+Every variant must give bitwise the same forces, factors and solutions (exit 1 otherwise).
+Printed: thread CPU time per robot, medians over interleaved rounds, and the ratios against the
+package's kernels in the same process.
 
     python scripts/probe_soa.py                      # 32 and 256 robots
     NUMBA_LOOP_VECTORIZE=0 python scripts/probe_soa.py  # the same with LLVM's loop vectorizer off
@@ -31,8 +37,9 @@ import numpy as np
 from numba import njit
 
 import soft_snake_gym  # noqa: F401 - registers the ids
-from soft_snake_gym.physics import forces
-from soft_snake_gym.physics.layout import P_DBEND, P_DSTRETCH, P_EA, P_EI
+from soft_snake_gym.physics import banded, forces, stepper
+from soft_snake_gym.physics.banded import KL, KU, PIVOT_THRESHOLD
+from soft_snake_gym.physics.layout import MEDIUM_WATER, P_DBEND, P_DSTRETCH, P_EA, P_EI, SimArrays
 
 
 @njit(cache=True, error_model="numpy")
@@ -139,6 +146,73 @@ def split(q, v, kbar, lbar, EA, EI, d, db, F, reps):
                     F[2 * j - 2 + m, r] -= T[m, r]
 
 
+@njit(cache=True, error_model="numpy")
+def per_robot_solve(J0, b0, J, piv, b, reps):
+    """``band_factor`` and ``band_solve`` robot by robot on copies of J0 (robots, n, width), b0."""
+    n = J0.shape[1]
+    for _ in range(reps):
+        for r in range(J0.shape[0]):
+            J[r] = J0[r]
+            b[r] = b0[r]
+            banded.band_factor(J[r], piv[r], n, PIVOT_THRESHOLD)
+            banded.band_solve(J[r], piv[r], n, b[r])
+
+
+@njit(cache=True, error_model="numpy")
+def soa_solve(J0, b0, J, b, kept, reps):
+    """The same with robots innermost (J0 (n, width, robots), b0 (n, robots)), no row exchanges.
+
+    ``kept[r]`` is False where ``band_factor`` would exchange rows for robot r (or find it
+    singular): that robot's result is not ``band_factor``'s and would be redone robot by robot.
+    """
+    n, _, R = J0.shape
+    for _ in range(reps):
+        J[:] = J0
+        b[:] = b0
+        kept[:] = True
+        for k in range(n):
+            imax = min(n, k + KL + 1)
+            for r in range(R):  # band_factor's test: keep the diagonal if >= threshold x the largest below
+                best = abs(J[k, KL, r])
+                for i in range(k + 1, imax):
+                    best = max(best, abs(J[i, k - i + KL, r]))
+                kept[r] = kept[r] and abs(J[k, KL, r]) >= PIVOT_THRESHOLD * best and best > 0.0
+            for i in range(k + 1, imax):
+                for r in range(R):
+                    J[i, k - i + KL, r] = J[i, k - i + KL, r] / J[k, KL, r]
+                for j in range(k + 1, min(n - 1, k + KU) + 1):
+                    for r in range(R):
+                        J[i, j - i + KL, r] -= J[i, k - i + KL, r] * J[k, j - k + KL, r]
+        for k in range(n):  # forward, then backward substitution, one row of b per loop
+            for i in range(k + 1, min(n, k + KL + 1)):
+                for r in range(R):
+                    b[i, r] -= J[i, k - i + KL, r] * b[k, r]
+        for k in range(n - 1, -1, -1):
+            for j in range(k + 1, min(n - 1, k + KU) + 1):
+                for r in range(R):
+                    b[k, r] -= J[k, j - k + KL, r] * b[j, r]
+            for r in range(R):
+                b[k, r] = b[k, r] / J[k, KL, r]
+
+
+def _timed(runs: dict, robots: int, rounds: int, reps: int) -> dict[str, float]:
+    """Median thread CPU time per robot [ns] of each run, over interleaved rounds."""
+    times: dict[str, list[float]] = {name: [] for name in runs}
+    for _ in range(rounds):
+        for name, run in runs.items():
+            start = time.thread_time()
+            run(reps)
+            times[name].append((time.thread_time() - start) / (reps * robots) * 1e9)
+    return {name: statistics.median(t) for name, t in times.items()}
+
+
+def _print(title: str, same: bool, times: dict[str, float]) -> None:
+    ref = next(iter(times.values()))
+    print(f"{title}, bitwise equal: {same}")
+    for name, t in times.items():
+        print(f"  {name:<26} {t:7.0f} ns per robot  {ref / t:5.2f}x")
+
+
 def probe(robots: int, rounds: int) -> bool:
     """Print the three variants' times for ``robots`` eels; False if their forces differ."""
     venv = gym.make_vec("SoftEel-v0", num_envs=robots, num_threads=1)
@@ -161,17 +235,30 @@ def probe(robots: int, rounds: int) -> bool:
         run(1)
     same = np.array_equal(F_ref, F_fused.T) and np.array_equal(F_ref, F_split.T)
     reps = max(1, 100_000 // robots)
-    times: dict[str, list[float]] = {name: [] for name in runs}
-    for _ in range(rounds):
-        for name, run in runs.items():
-            start = time.thread_time()
-            run(reps)
-            times[name].append((time.thread_time() - start) / (reps * robots) * 1e9)
-    ref = statistics.median(times["per robot (assemble)"])
-    print(f"{robots} eels, forces bitwise equal: {same}")
-    for name, t in times.items():
-        print(f"  {name:<22} {statistics.median(t):7.0f} ns per robot  {ref / statistics.median(t):5.2f}x")
-    return same
+    _print(f"{robots} eels, elastic and damping forces", same, _timed(runs, robots, rounds, reps))
+
+    # the backward-Euler Jacobian of each robot's state (water, h = 0.01 s), factored and solved
+    n = q.shape[1]
+    J0 = np.zeros((robots, n, J.shape[2]))
+    for r in range(robots):
+        arrays = SimArrays(*(np.array(a[r]) for a in sim))
+        stepper._be_residual(arrays, 0.01, MEDIUM_WATER, True)
+        J0[r] = arrays.J
+    b0 = rng.standard_normal((robots, n))
+    Jw, bw, piv = np.empty_like(J0), np.empty_like(b0), np.zeros((robots, n), dtype=np.int64)
+    J0c, b0c = np.ascontiguousarray(J0.transpose(1, 2, 0)), np.ascontiguousarray(b0.T)
+    Jc, bc, kept = np.empty_like(J0c), np.empty_like(b0c), np.ones(robots, dtype=np.bool_)
+    runs = {
+        "per robot (band_factor)": lambda k: per_robot_solve(J0, b0, Jw, piv, bw, k),
+        "robots innermost": lambda k: soa_solve(J0c, b0c, Jc, bc, kept, k),
+    }
+    for run in runs.values():
+        run(1)
+    exchanged = int((piv != np.arange(n)).any(axis=1).sum())
+    solved = bool(kept.all()) and np.array_equal(bw, bc.T) and np.array_equal(Jw, Jc.transpose(2, 0, 1))
+    title = f"{robots} eels, factor + solve (2N = {n}; robots with a row exchange: {exchanged})"
+    _print(title, solved, _timed(runs, robots, rounds, reps))
+    return same and solved
 
 
 def main() -> int:
