@@ -11,12 +11,14 @@ episodes in three ways, with the same arithmetic as ``assemble``:
 - split: robot index innermost, each loop writing its terms into fixed rows of a scratch
   array, then adding each into its force row in a loop of its own.
 
-Then the Newton step's linear algebra: each robot's backward-Euler Jacobian (water, h = 0.01 s)
+Then the same forces with their Jacobian (``assemble(jac=True)``) against the split form
+carried on to the band: each node's quantities into scratch rows, then one loop per band
+entry. Then the Newton step's linear algebra: each robot's backward-Euler Jacobian (water, h = 0.01 s)
 factored and solved by ``band_factor`` and ``band_solve``, robot by robot, and with the robot
 index innermost without row exchanges (a robot that would need one is flagged, to be redone
 robot by robot).
 
-Every variant must give bitwise the same forces, factors and solutions (exit 1 otherwise).
+Every variant must give bitwise the same forces, Jacobians, factors and solutions (exit 1 otherwise).
 Printed: thread CPU time per robot, medians over interleaved rounds, and the ratios against the
 package's kernels in the same process.
 
@@ -146,6 +148,157 @@ def split(q, v, kbar, lbar, EA, EI, d, db, F, reps):
                     F[2 * j - 2 + m, r] -= T[m, r]
 
 
+# scratch rows of the bending Jacobian, per node and robot (robots innermost)
+_ALPHA, _BETA, _C = 0, 1, 2
+_G = 3  # g0x, g0y, g1x, g1y, g2x, g2y: rows 3..8
+_HA, _HB, _HD = 9, 12, 15  # (h00, h01, h11) of edge a, edge b, and hb - ha
+_RV = 18  # r0x, r0y, r1x, r1y, r2x, r2y: rows 18..23
+_S, _TS = 24, 27  # the stretching block (s00, s01, s11) and its damping part (t00, t01, t10, t11)
+N_SCRATCH = 31
+
+
+@njit(cache=True, error_model="numpy")
+def per_robot_jacobian(q, v, kbar, lbar, prm, F, J, cx, cv, reps):
+    """``assemble``'s internal forces and their Jacobian ``cx dF/dq + cv dF/dv``, robot by robot."""
+    for _ in range(reps):
+        for r in range(q.shape[0]):
+            F[r, :] = 0.0
+            J[r, :, :] = 0.0
+            forces.assemble(q[r], v[r], kbar[r], lbar[r], prm[r], F[r], J[r], cx, cv, True, False)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _scatter(J, row, col, T, a, b, c, sign):
+    """``J[row, col] += sign T[a] T[b] T[c]`` over robots (``T[a] T[b]`` first, as ``assemble``)."""
+    for r in range(J.shape[2]):
+        J[row, col, r] += sign * (T[a, r] * T[b, r] * T[c, r])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _scatter_h(J, row, col, T, gi, gj, h, sign):
+    """``J[row, col] += alpha gi gj + sign beta h`` over robots (a bending block's entry)."""
+    if sign == 0.0:
+        for r in range(J.shape[2]):
+            J[row, col, r] += T[_ALPHA, r] * T[gi, r] * T[gj, r]
+    else:
+        for r in range(J.shape[2]):
+            J[row, col, r] += T[_ALPHA, r] * T[gi, r] * T[gj, r] + sign * (T[_BETA, r] * T[h, r])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _scatter_row(J, row, col, T, m, sign):
+    """``J[row, col] += sign T[m]`` over robots."""
+    for r in range(J.shape[2]):
+        J[row, col, r] += sign * T[m, r]
+
+
+@njit(cache=True, error_model="numpy")
+def split_jacobian(q, v, kbar, lbar, EA, EI, d, db, F, J, T, cx, cv, reps):
+    """The same with robots innermost: the forces as :func:`split`, then the Jacobian.
+
+    Into the band ``J`` (n, width, robots), with each node's quantities in scratch rows ``T``
+    and one loop per band entry.
+    """
+    n2, R = q.shape
+    for _ in range(reps):
+        split(q, v, kbar, lbar, EA, EI, d, db, F, 1)
+        J[:, :, :] = 0.0
+        for k in range(n2 // 2 - 1):
+            for r in range(R):
+                ex = q[2 * k + 2, r] - q[2 * k, r]
+                ey = q[2 * k + 3, r] - q[2 * k + 1, r]
+                l = math.sqrt(ex * ex + ey * ey)
+                tx, ty = ex / l, ey / l
+                lb = lbar[k, r]
+                f = -EA[r] * (l / lb - 1.0)
+                dvx, dvy = v[2 * k + 2, r] - v[2 * k, r], v[2 * k + 3, r] - v[2 * k + 1, r]
+                ldot = tx * dvx + ty * dvy
+                f -= d[r] * ldot
+                a1, a2 = EA[r] / lb, -f / l
+                T[_S, r] = cx * (a1 * tx * tx + a2 * (1.0 - tx * tx)) + cv * d[r] * tx * tx
+                T[_S + 1, r] = cx * (a1 - a2) * tx * ty + cv * d[r] * tx * ty
+                T[_S + 2, r] = cx * (a1 * ty * ty + a2 * (1.0 - ty * ty)) + cv * d[r] * ty * ty
+                px, py = cx * d[r] * (dvx - ldot * tx) / l, cx * d[r] * (dvy - ldot * ty) / l
+                T[_TS, r], T[_TS + 1, r], T[_TS + 2, r], T[_TS + 3, r] = tx * px, tx * py, ty * px, ty * py
+            # add_edge_pattern, then the damping blocks: per entry in assemble's order
+            for i, j, sign in ((k, k, -1.0), (k, k + 1, 1.0), (k + 1, k, 1.0), (k + 1, k + 1, -1.0)):
+                row, col = 2 * i, 2 * j - 2 * i + KL
+                _scatter_row(J, row, col, T, _S, sign)
+                _scatter_row(J, row, col + 1, T, _S + 1, sign)
+                _scatter_row(J, row + 1, col - 1, T, _S + 1, sign)
+                _scatter_row(J, row + 1, col, T, _S + 2, sign)
+            for i, j, sign in ((k, k, -1.0), (k, k + 1, 1.0), (k + 1, k, 1.0), (k + 1, k + 1, -1.0)):
+                row, col = 2 * i, 2 * j - 2 * i + KL
+                for m in range(4):
+                    _scatter_row(J, row + m // 2, col + m % 2 - m // 2, T, _TS + m, sign)
+        for j in range(1, n2 // 2 - 1):
+            for r in range(R):
+                ax, ay = q[2 * j, r] - q[2 * j - 2, r], q[2 * j + 1, r] - q[2 * j - 1, r]
+                bx, by = q[2 * j + 2, r] - q[2 * j, r], q[2 * j + 3, r] - q[2 * j + 1, r]
+                la, lbn = math.sqrt(ax * ax + ay * ay), math.sqrt(bx * bx + by * by)
+                tax, tay, tbx, tby = ax / la, ay / la, bx / lbn, by / lbn
+                kap = 2.0 * (tax * tby - tay * tbx) / (1.0 + (tax * tbx + tay * tby))
+                g0x, g0y, g2x, g2y = -tay / la, tax / la, -tby / lbn, tbx / lbn
+                g1x, g1y = -g0x - g2x, -g0y - g2y
+                kb = EI[r] / (0.5 * (lbar[j - 1, r] + lbar[j, r]))
+                dk = kap - kbar[j - 1, r]
+                w = 1.0 + 0.25 * kap * kap
+                phidot = (
+                    g0x * v[2 * j - 2, r]
+                    + g0y * v[2 * j - 1, r]
+                    + g1x * v[2 * j, r]
+                    + g1y * v[2 * j + 1, r]
+                    + g2x * v[2 * j + 2, r]
+                    + g2y * v[2 * j + 3, r]
+                )
+                dbr = db[r]
+                s2 = kb * (w * w + dk * 0.5 * kap * w) + dbr * w * w * kap * phidot
+                T[_ALPHA, r] = -(cx * s2 + cv * dbr * w * w)
+                T[_BETA, r] = -cx * (kb * dk * w + dbr * w * w * phidot)
+                T[_C, r] = -cx * dbr * w * w
+                T[_G, r], T[_G + 1, r], T[_G + 2, r], T[_G + 3, r] = g0x, g0y, g1x, g1y
+                T[_G + 4, r], T[_G + 5, r] = g2x, g2y
+                ia, ib = 1.0 / (la * la), 1.0 / (lbn * lbn)
+                ha00, ha01, ha11 = 2.0 * tax * tay * ia, (tay * tay - tax * tax) * ia, -2.0 * tax * tay * ia
+                hb00, hb01, hb11 = 2.0 * tbx * tby * ib, (tby * tby - tbx * tbx) * ib, -2.0 * tbx * tby * ib
+                T[_HA, r], T[_HA + 1, r], T[_HA + 2, r] = ha00, ha01, ha11
+                T[_HB, r], T[_HB + 1, r], T[_HB + 2, r] = hb00, hb01, hb11
+                T[_HD, r], T[_HD + 1, r], T[_HD + 2, r] = hb00 - ha00, hb01 - ha01, hb11 - ha11
+                ux, uy = v[2 * j, r] - v[2 * j - 2, r], v[2 * j + 1, r] - v[2 * j - 1, r]
+                wx, wy = v[2 * j + 2, r] - v[2 * j, r], v[2 * j + 3, r] - v[2 * j + 1, r]
+                r0x, r0y = ha00 * ux + ha01 * uy, ha01 * ux + ha11 * uy
+                r2x, r2y = hb00 * wx + hb01 * wy, hb01 * wx + hb11 * wy
+                T[_RV, r], T[_RV + 1, r], T[_RV + 4, r], T[_RV + 5, r] = r0x, r0y, r2x, r2y
+                T[_RV + 2, r], T[_RV + 3, r] = -r0x - r2x, -r0y - r2y
+            # the damping blocks (a, b) = c g_a r_b^T, nodes a, b in j-1 .. j+1
+            for ai in range(3):
+                for bi in range(3):
+                    row, col = 2 * (j - 1 + ai), 2 * (bi - ai) + KL
+                    gx, gy, rx, ry = _G + 2 * ai, _G + 2 * ai + 1, _RV + 2 * bi, _RV + 2 * bi + 1
+                    _scatter(J, row, col, T, _C, gx, rx, 1.0)
+                    _scatter(J, row, col + 1, T, _C, gx, ry, 1.0)
+                    _scatter(J, row + 1, col - 1, T, _C, gy, rx, 1.0)
+                    _scatter(J, row + 1, col, T, _C, gy, ry, 1.0)
+            # the blocks alpha g_a g_b^T + beta (edge-angle Hessians), in assemble's order
+            for ai, bi, h, sign in (
+                (0, 0, _HA, -1.0),
+                (0, 1, _HA, 1.0),
+                (1, 0, _HA, 1.0),
+                (0, 2, _HA, 0.0),
+                (2, 0, _HA, 0.0),
+                (1, 1, _HD, 1.0),
+                (1, 2, _HB, -1.0),
+                (2, 1, _HB, -1.0),
+                (2, 2, _HB, 1.0),
+            ):
+                row, col = 2 * (j - 1 + ai), 2 * (bi - ai) + KL
+                ga, gb = _G + 2 * ai, _G + 2 * bi
+                _scatter_h(J, row, col, T, ga, gb, h, sign)
+                _scatter_h(J, row, col + 1, T, ga, gb + 1, h + 1, sign)
+                _scatter_h(J, row + 1, col - 1, T, ga + 1, gb, h + 1, sign)
+                _scatter_h(J, row + 1, col, T, ga + 1, gb + 1, h + 2, sign)
+
+
 @njit(cache=True, error_model="numpy")
 def per_robot_solve(J0, b0, J, piv, b, reps):
     """``band_factor`` and ``band_solve`` robot by robot on copies of J0 (robots, n, width), b0."""
@@ -237,6 +390,20 @@ def probe(robots: int, rounds: int) -> bool:
     reps = max(1, 100_000 // robots)
     _print(f"{robots} eels, elastic and damping forces", same, _timed(runs, robots, rounds, reps))
 
+    # the same forces with their Jacobian (cx = -h^2, cv = -h as backward Euler's h = 0.01 s)
+    cx, cv = -1e-4, -1e-2
+    J_ref = np.zeros((robots, q.shape[1], J.shape[2]))
+    J_soa = np.zeros((q.shape[1], J.shape[2], robots))
+    scratch = np.zeros((N_SCRATCH, robots))
+    runs = {
+        "per robot (assemble)": lambda k: per_robot_jacobian(q, v, kbar, lbar, prm, F_ref, J_ref, cx, cv, k),
+        "split": lambda k: split_jacobian(*cols, *params, F_split, J_soa, scratch, cx, cv, k),
+    }
+    for run in runs.values():
+        run(1)
+    jacobian = np.array_equal(F_ref, F_split.T) and np.array_equal(J_ref, J_soa.transpose(2, 0, 1))
+    _print(f"{robots} eels, forces and Jacobian", jacobian, _timed(runs, robots, rounds, reps))
+
     # the backward-Euler Jacobian of each robot's state (water, h = 0.01 s), factored and solved
     n = q.shape[1]
     J0 = np.zeros((robots, n, J.shape[2]))
@@ -258,7 +425,7 @@ def probe(robots: int, rounds: int) -> bool:
     solved = bool(kept.all()) and np.array_equal(bw, bc.T) and np.array_equal(Jw, Jc.transpose(2, 0, 1))
     title = f"{robots} eels, factor + solve (2N = {n}; robots with a row exchange: {exchanged})"
     _print(title, solved, _timed(runs, robots, rounds, reps))
-    return same and solved
+    return same and jacobian and solved
 
 
 def main() -> int:
