@@ -211,6 +211,8 @@ def test_hyperparameter_file_is_plain_yaml_keyed_by_env_id():
     assert cfg.policy_kwargs == {"net_arch": [64, 64], "log_std_init": -2.0}
     sac = load_train_config("SoftEel-v0", "SAC")
     assert sac.algo == "SAC" and "buffer_size" in sac.hyperparams
+    # an empty init_from (YAML null, or "--hyperparams init_from=") starts at random, as ""
+    assert load_train_config("SoftEel-v0", overrides={"init_from": None}).init_from == ""
 
 
 @pytest.mark.parametrize("env_id,baseline", [("SoftEel-v0", "pid"), ("SoftWorm-v0", "inching-pid")])
