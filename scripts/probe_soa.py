@@ -66,8 +66,8 @@ def _edge_force(q, v, k, r, lb, EA, d):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _bending_forces(q, v, j, r, l0, l1, kb0, EI, db):
-    """Bending (and its damping) forces on nodes j-1, j, j+1 of robot r, as ``assemble`` computes them."""
+def _turning(q, j, r):
+    """``geometry.turning`` at node j of robot r (q: (2N, robots)), the same arithmetic."""
     ax = q[2 * j, r] - q[2 * j - 2, r]
     ay = q[2 * j + 1, r] - q[2 * j - 1, r]
     bx = q[2 * j + 2, r] - q[2 * j, r]
@@ -79,10 +79,13 @@ def _bending_forces(q, v, j, r, l0, l1, kb0, EI, db):
     kap = 2.0 * (tax * tby - tay * tbx) / (1.0 + (tax * tbx + tay * tby))
     g0x, g0y = -tay / la, tax / la
     g2x, g2y = -tby / lb, tbx / lb
-    g1x, g1y = -g0x - g2x, -g0y - g2y
-    w = 1.0 + 0.25 * kap * kap
-    s = EI / (0.5 * (l0 + l1)) * (kap - kb0) * w
-    phidot = (
+    return kap, g0x, g0y, -g0x - g2x, -g0y - g2y, g2x, g2y, tax, tay, tbx, tby, la, lb
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _turning_rate(v, j, r, g0x, g0y, g1x, g1y, g2x, g2y):
+    """``geometry.turning_rate`` at node j of robot r."""
+    return (
         g0x * v[2 * j - 2, r]
         + g0y * v[2 * j - 1, r]
         + g1x * v[2 * j, r]
@@ -90,7 +93,15 @@ def _bending_forces(q, v, j, r, l0, l1, kb0, EI, db):
         + g2x * v[2 * j + 2, r]
         + g2y * v[2 * j + 3, r]
     )
-    s += db * w * w * phidot
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _bending_forces(q, v, j, r, l0, l1, kb0, EI, db):
+    """Bending (and its damping) forces on nodes j-1, j, j+1 of robot r, as ``assemble`` computes them."""
+    kap, g0x, g0y, g1x, g1y, g2x, g2y = _turning(q, j, r)[:7]
+    w = 1.0 + 0.25 * kap * kap
+    s = EI / (0.5 * (l0 + l1)) * (kap - kb0) * w
+    s += db * w * w * _turning_rate(v, j, r, g0x, g0y, g1x, g1y, g2x, g2y)
     return s * g0x, s * g0y, s * g1x, s * g1y, s * g2x, s * g2y
 
 
@@ -233,24 +244,11 @@ def split_jacobian(q, v, kbar, lbar, EA, EI, d, db, F, J, T, cx, cv, reps):
                     _scatter_row(J, row + m // 2, col + m % 2 - m // 2, T, _TS + m, sign)
         for j in range(1, n2 // 2 - 1):
             for r in range(R):
-                ax, ay = q[2 * j, r] - q[2 * j - 2, r], q[2 * j + 1, r] - q[2 * j - 1, r]
-                bx, by = q[2 * j + 2, r] - q[2 * j, r], q[2 * j + 3, r] - q[2 * j + 1, r]
-                la, lbn = math.sqrt(ax * ax + ay * ay), math.sqrt(bx * bx + by * by)
-                tax, tay, tbx, tby = ax / la, ay / la, bx / lbn, by / lbn
-                kap = 2.0 * (tax * tby - tay * tbx) / (1.0 + (tax * tbx + tay * tby))
-                g0x, g0y, g2x, g2y = -tay / la, tax / la, -tby / lbn, tbx / lbn
-                g1x, g1y = -g0x - g2x, -g0y - g2y
+                kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = _turning(q, j, r)
                 kb = EI[r] / (0.5 * (lbar[j - 1, r] + lbar[j, r]))
                 dk = kap - kbar[j - 1, r]
                 w = 1.0 + 0.25 * kap * kap
-                phidot = (
-                    g0x * v[2 * j - 2, r]
-                    + g0y * v[2 * j - 1, r]
-                    + g1x * v[2 * j, r]
-                    + g1y * v[2 * j + 1, r]
-                    + g2x * v[2 * j + 2, r]
-                    + g2y * v[2 * j + 3, r]
-                )
+                phidot = _turning_rate(v, j, r, g0x, g0y, g1x, g1y, g2x, g2y)
                 dbr = db[r]
                 s2 = kb * (w * w + dk * 0.5 * kap * w) + dbr * w * w * kap * phidot
                 T[_ALPHA, r] = -(cx * s2 + cv * dbr * w * w)
