@@ -1,4 +1,4 @@
-"""Robots innermost (structure of arrays): does numba vectorize a force kernel across robots?
+"""Robots innermost (structure of arrays): does numba vectorize the step's kernels across robots?
 
 The first measurement for a structure-of-arrays batched kernel (docs/performance.md, "The
 layout and the vectorizer"). The elastic and damping residual of ``forces.assemble``
