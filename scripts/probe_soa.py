@@ -11,14 +11,15 @@ episodes in three ways, with the same arithmetic as ``assemble``:
 - split: robot index innermost, each loop writing its terms into fixed rows of a scratch
   array, then adding each into its force row in a loop of its own.
 
-Then the same forces with their Jacobian (``assemble(jac=True)``) against the split form
+Then the same forces with the water's drag and its power (``assemble(water=True)``), the drag
+split the same way. Then the same forces with their Jacobian (``assemble(jac=True)``) against the split form
 carried on to the band: each node's quantities into scratch rows, then one loop per band
 entry. Then the Newton step's linear algebra: each robot's backward-Euler Jacobian (water, h = 0.01 s)
 factored and solved by ``band_factor`` and ``band_solve``, robot by robot, and with the robot
 index innermost without row exchanges (a robot that would need one is flagged, to be redone
 robot by robot).
 
-Every variant must give bitwise the same forces, Jacobians, factors and solutions (exit 1 otherwise).
+Every variant must give bitwise the same forces, powers, Jacobians, factors and solutions (exit 1 otherwise).
 Printed: thread CPU time per robot, medians over interleaved rounds, and the ratios against the
 package's kernels in the same process.
 
@@ -39,9 +40,8 @@ import numpy as np
 from numba import njit
 
 import soft_snake_gym  # noqa: F401 - registers the ids
-from soft_snake_gym.physics import banded, forces, stepper
+from soft_snake_gym.physics import banded, forces, layout, stepper
 from soft_snake_gym.physics.banded import KL, KU, PIVOT_THRESHOLD
-from soft_snake_gym.physics.layout import MEDIUM_WATER, P_DBEND, P_DSTRETCH, P_EA, P_EI, SimArrays
 
 
 @njit(cache=True, error_model="numpy")
@@ -157,6 +157,54 @@ def split(q, v, kbar, lbar, EA, EI, d, db, F, reps):
             for m in range(6):
                 for r in range(R):
                     F[2 * j - 2 + m, r] -= T[m, r]
+
+
+@njit(cache=True, error_model="numpy")
+def per_robot_water(q, v, kbar, lbar, prm, F, J, power, reps):
+    """``assemble``'s internal forces and the water's drag, robot by robot, and the drag power."""
+    for _ in range(reps):
+        for r in range(q.shape[0]):
+            F[r, :] = 0.0
+            power[r] = forces.assemble(
+                q[r], v[r], kbar[r], lbar[r], prm[r], F[r], J[r], 0.0, 0.0, False, True
+            )
+
+
+@njit(cache=True, error_model="numpy")
+def split_water(q, v, kbar, lbar, EA, EI, d, db, prm, F, power, reps):
+    """The same with robots innermost: :func:`split`'s forces, then the drag, split the same way.
+
+    ``prm`` is (P, robots); the drag per edge as ``assemble`` computes it, its two force
+    components into scratch rows, then one loop per force row.
+    """
+    n2, R = q.shape
+    T = np.empty((2, R))
+    for _ in range(reps):
+        split(q, v, kbar, lbar, EA, EI, d, db, F, 1)
+        power[:] = 0.0
+        for i in range(n2 // 2 - 1):
+            for r in range(R):
+                rho, a, b = prm[layout.P_RHO, r], prm[layout.P_A, r], prm[layout.P_B, r]
+                ct = 0.25 * rho * math.pi * prm[layout.P_CF, r] * (a + b)  # as assemble
+                cn = rho * prm[layout.P_CD, r] * a
+                ex = q[2 * i + 2, r] - q[2 * i, r]
+                ey = q[2 * i + 3, r] - q[2 * i + 1, r]
+                l = math.sqrt(ex * ex + ey * ey)
+                tx, ty = ex / l, ey / l
+                nx, ny = -ty, tx
+                vx = 0.5 * (v[2 * i, r] + v[2 * i + 2, r])
+                vy = 0.5 * (v[2 * i + 1, r] + v[2 * i + 3, r])
+                vt, vn = vx * tx + vy * ty, vx * nx + vy * ny
+                gt = vt + vt * abs(vt)
+                gn = vn + vn * abs(vn)
+                fx = -ct * l * gt * tx - cn * l * gn * nx
+                fy = -ct * l * gt * ty - cn * l * gn * ny
+                power[r] -= fx * vx + fy * vy
+                T[0, r], T[1, r] = 0.5 * fx, 0.5 * fy
+            for m in range(4):  # nodes i and i+1, x and y
+                row = 2 * i + m
+                for r in range(R):
+                    F[row, r] += T[m % 2, r]
 
 
 # scratch rows of the bending Jacobian, per node and robot (robots innermost)
@@ -373,9 +421,11 @@ def probe(robots: int, rounds: int) -> bool:
         venv.step(rng.uniform(-1, 1, venv.action_space.shape))
     sim = venv.batch.sim
     q, v, kbar, lbar, prm, J = (np.array(a) for a in (sim.q, sim.v, sim.kbar, sim.lbar, sim.prm, sim.J))
-    prm[:, P_DSTRETCH] = 0.5  # stretching damping on too, so that every term is timed
+    prm[:, layout.P_DSTRETCH] = 0.5  # stretching damping on too, so that every term is timed
     cols = [np.ascontiguousarray(a.T) for a in (q, v, kbar, lbar)]
-    params = [np.ascontiguousarray(prm[:, i]) for i in (P_EA, P_EI, P_DSTRETCH, P_DBEND)]
+    params = [
+        np.ascontiguousarray(prm[:, i]) for i in (layout.P_EA, layout.P_EI, layout.P_DSTRETCH, layout.P_DBEND)
+    ]
     F_ref, F_fused, F_split = np.zeros_like(q), np.zeros_like(cols[0]), np.zeros_like(cols[0])
     runs = {
         "per robot (assemble)": lambda n: per_robot(q, v, kbar, lbar, prm, F_ref, J, n),
@@ -387,6 +437,17 @@ def probe(robots: int, rounds: int) -> bool:
     same = np.array_equal(F_ref, F_fused.T) and np.array_equal(F_ref, F_split.T)
     reps = max(1, 100_000 // robots)
     _print(f"{robots} eels, elastic and damping forces", same, _timed(runs, robots, rounds, reps))
+
+    # the same forces and the water's drag, and the drag power
+    P_ref, P_soa, prm_c = np.zeros(robots), np.zeros(robots), np.ascontiguousarray(prm.T)
+    runs = {
+        "per robot (assemble)": lambda k: per_robot_water(q, v, kbar, lbar, prm, F_ref, J, P_ref, k),
+        "split": lambda k: split_water(*cols, *params, prm_c, F_split, P_soa, k),
+    }
+    for run in runs.values():
+        run(1)
+    water = np.array_equal(F_ref, F_split.T) and np.array_equal(P_ref, P_soa)
+    _print(f"{robots} eels, forces with drag, and drag power", water, _timed(runs, robots, rounds, reps))
 
     # the same forces with their Jacobian (cx = -h^2, cv = -h as backward Euler's h = 0.01 s)
     cx, cv = -1e-4, -1e-2
@@ -406,8 +467,8 @@ def probe(robots: int, rounds: int) -> bool:
     n = q.shape[1]
     J0 = np.zeros((robots, n, J.shape[2]))
     for r in range(robots):
-        arrays = SimArrays(*(np.array(a[r]) for a in sim))
-        stepper._be_residual(arrays, 0.01, MEDIUM_WATER, True)
+        arrays = layout.SimArrays(*(np.array(a[r]) for a in sim))
+        stepper._be_residual(arrays, 0.01, layout.MEDIUM_WATER, True)
         J0[r] = arrays.J
     b0 = rng.standard_normal((robots, n))
     Jw, bw, piv = np.empty_like(J0), np.empty_like(b0), np.zeros((robots, n), dtype=np.int64)
@@ -423,7 +484,7 @@ def probe(robots: int, rounds: int) -> bool:
     solved = bool(kept.all()) and np.array_equal(bw, bc.T) and np.array_equal(Jw, Jc.transpose(2, 0, 1))
     title = f"{robots} eels, factor + solve (2N = {n}; robots with a row exchange: {exchanged})"
     _print(title, solved, _timed(runs, robots, rounds, reps))
-    return same and jacobian and solved
+    return same and water and jacobian and solved
 
 
 def main() -> int:
