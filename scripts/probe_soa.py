@@ -1,29 +1,29 @@
 """Robots innermost (structure of arrays): does numba vectorize the step's kernels across robots?
 
 The first measurement for a structure-of-arrays batched kernel (docs/performance.md, "The
-layout and the vectorizer"). The elastic and damping residual of ``forces.assemble``
-(stretching and bending, no Jacobian, no water) is computed for eels taken from random-action
-episodes in three ways, with the same arithmetic as ``assemble``:
+layout and the vectorizer"), on eels taken from random-action episodes, each kernel with the
+package's own arithmetic:
 
-- per robot: ``assemble`` itself, robot by robot (the package's layout);
-- fused: robot index innermost, each loop adding straight into the force rows of the nodes it
-  pushes (two per edge, three per bending node);
-- split: robot index innermost, each loop writing its terms into fixed rows of a scratch
-  array, then adding each into its force row in a loop of its own.
+1. The elastic and damping forces of ``forces.assemble`` (no Jacobian, no water), three ways:
+   - per robot: ``assemble`` itself, robot by robot (the package's layout);
+   - fused: robot index innermost, each loop adding straight into the force rows of the nodes
+     it pushes (two per edge, three per bending node);
+   - split: robot index innermost, each loop writing its terms into fixed rows of a scratch
+     array, then adding each into its force row in a loop of its own.
+2. The same forces with the water's drag and the drag power (``assemble(water=True)``), the
+   drag split the same way.
+3. The forces with their Jacobian (``assemble(jac=True)``), the split carried on to the band:
+   each node's quantities into scratch rows, then one loop per band entry.
+4. The Newton step's linear algebra: each robot's backward-Euler Jacobian (water, h = 0.01 s)
+   factored and solved by ``band_factor`` and ``band_solve``, robot by robot, and with the
+   robot index innermost without row exchanges (a robot that would need one is flagged, to be
+   redone robot by robot).
 
-Then the same forces with the water's drag and its power (``assemble(water=True)``), the drag
-split the same way. Then the same forces with their Jacobian (``assemble(jac=True)``) against the split form
-carried on to the band: each node's quantities into scratch rows, then one loop per band
-entry. Then the Newton step's linear algebra: each robot's backward-Euler Jacobian (water, h = 0.01 s)
-factored and solved by ``band_factor`` and ``band_solve``, robot by robot, and with the robot
-index innermost without row exchanges (a robot that would need one is flagged, to be redone
-robot by robot).
+Every variant must give bitwise the same forces, powers, Jacobians, factors and solutions
+(exit 1 otherwise). Printed: thread CPU time per robot, medians over interleaved rounds, and
+the ratios against the package's kernels in the same process.
 
-Every variant must give bitwise the same forces, powers, Jacobians, factors and solutions (exit 1 otherwise).
-Printed: thread CPU time per robot, medians over interleaved rounds, and the ratios against the
-package's kernels in the same process.
-
-    python scripts/probe_soa.py                      # 32 and 256 robots
+    python scripts/probe_soa.py                         # 32 and 256 robots
     NUMBA_LOOP_VECTORIZE=0 python scripts/probe_soa.py  # the same with LLVM's loop vectorizer off
 """
 
