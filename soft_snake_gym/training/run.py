@@ -95,21 +95,24 @@ def save_checkpoint(model, run_dir: Path, started: float | None = None) -> Path:
     steps = model.num_timesteps
     path = ckdir / f"model_{steps}_steps.zip"
     with _signals_held():
-        partial = ckdir / f"model_{steps}_steps.partial.zip"
-        model.save(partial)
         vn = model.get_vec_normalize_env()
-        if vn is not None:
-            stats = ckdir / f"vecnormalize_{steps}_steps.pkl"
-            vn.save(str(stats.with_suffix(".partial")))
-            os.replace(stats.with_suffix(".partial"), stats)
-        os.replace(partial, path)
+        if vn is not None:  # before the model: a checkpoint's model never lacks its statistics
+            _written(ckdir / f"vecnormalize_{steps}_steps.pkl", lambda partial: vn.save(str(partial)))
+        _written(path, model.save)
         if started is not None:
             walls = _checkpoint_walls(run_dir)
             walls[str(steps)] = round(time.time() - started, 1)
-            partial_walls = ckdir / "wall_s.partial.json"
-            partial_walls.write_text(json.dumps(walls, indent=1) + "\n")
-            os.replace(partial_walls, ckdir / "wall_s.json")
+            _written(
+                ckdir / "wall_s.json", lambda partial: partial.write_text(json.dumps(walls, indent=1) + "\n")
+            )
     return path
+
+
+def _written(path: Path, write) -> None:
+    """Write ``path`` by ``write(partial)`` under a temporary name beside it, then rename it into place."""
+    partial = path.with_name(f"{path.stem}.partial{path.suffix}")
+    write(partial)
+    os.replace(partial, path)
 
 
 def _checkpoint_walls(run_dir: Path) -> dict[str, float]:
