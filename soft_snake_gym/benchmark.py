@@ -19,8 +19,9 @@ numbers move with the load:
     (the same 1.62 m, 7.2 kg body cut into N - 1 edges, swimming the thesis's serpenoid gait).
 
 Throughput cases drive every env with uniform random actions in [-1, 1] (an untrained
-policy), resetting when an episode ends; one extra row drives 256 batched eels with the
-thesis gait (a smooth policy: fewer Newton iterations per step). Every row gives robot-steps
+policy), resetting when an episode ends; two extra rows drive 256 batched eels with the
+thesis gait (a smooth policy: fewer Newton iterations per step) and with the optional BDF2
+integrator (``integrator.method="bdf2"``, one implicit stage per step). Every row gives robot-steps
 per second and simulated seconds per wall-clock second (steps/s times the env's control step,
 read from the env: 0.01 s for ours, 0.04 s for the Swimmers). The cases are interleaved over ``repeats`` rounds
 and each reports the median round, so a load change during the run hits all of them alike.
@@ -336,6 +337,12 @@ def run_benchmark(
         cases["SoftEel-v0 batched n=256 threads=1, gait actions"] = _VectorCase(
             lambda: gym.make_vec("SoftEel-v0", num_envs=256, num_threads=1), 256, _gait_actions(256)
         )
+        cases[f"SoftEel-v0 batched n=256 threads={all_threads}, bdf2"] = _VectorCase(
+            lambda: gym.make_vec(
+                "SoftEel-v0", num_envs=256, num_threads=all_threads, integrator={"method": "bdf2"}
+            ),
+            256,
+        )
     mujoco_missing = _have_mujoco()
     if mujoco_missing is None:
         cases["Swimmer-v5 gym.make"] = _SingleCase("Swimmer-v5")
@@ -425,9 +432,16 @@ def _rate(res: dict[str, Any], case: str) -> float | None:
     return row["steps_per_s"] if row else None
 
 
-def _best(res: dict[str, Any], prefix: str) -> dict[str, Any] | None:
-    """The fastest row whose case starts with ``prefix`` (over thread counts), random actions."""
-    rows = [r for r in res["throughput"] if r["case"].startswith(prefix) and "gait" not in r["case"]]
+def _best(res: dict[str, Any], prefix: str, variant: str = "") -> dict[str, Any] | None:
+    """The fastest row whose case starts with ``prefix`` (over thread counts), random actions.
+
+    The env's defaults, or with ``variant`` the rows named ``"<case>, <variant>"``.
+    """
+    rows = [
+        r
+        for r in res["throughput"]
+        if r["case"].startswith(prefix) and r["case"].partition(", ")[2] == variant
+    ]
     return max(rows, key=lambda r: r["steps_per_s"]) if rows else None
 
 
@@ -461,6 +475,11 @@ def _ratios(res: dict[str, Any]) -> dict[str, Any]:
         gait = _row(res, "SoftEel-v0 batched n=256 threads=1, gait actions")
         if gait:
             out["batched256_gait_vs_swimmer"] = gait["sim_s_per_s"] / swimmer["sim_s_per_s"]
+        bdf2 = _best(res, "SoftEel-v0 batched n=256 threads=", variant="bdf2")
+        if bdf2:
+            out["batched256_bdf2_vs_swimmer"] = bdf2["sim_s_per_s"] / swimmer["sim_s_per_s"]
+            if pool:
+                out["batched256_bdf2_vs_envpool"] = bdf2["sim_s_per_s"] / pool["sim_s_per_s"]
     ppo = {r["kind"]: r["steps_per_s"] for r in res["ppo"]}
     if "batched" in ppo and "subproc" in ppo:
         out["ppo_batched_vs_subproc"] = ppo["batched"] / ppo["subproc"]
@@ -547,6 +566,13 @@ def format_report(res: dict[str, Any]) -> str:
     if "batched256_gait_vs_swimmer" in ratios:
         lines.append(
             f"    (with the thesis gait instead of random actions: {ratios['batched256_gait_vs_swimmer']:.2f}x)"
+        )
+    if "batched256_bdf2_vs_swimmer" in ratios:
+        pool = ratios.get("batched256_bdf2_vs_envpool")
+        lines.append(
+            f"    (with integrator.method='bdf2': {ratios['batched256_bdf2_vs_swimmer']:.2f}x"
+            + (f"; against EnvPool {pool:.2f}x" if pool else "")
+            + ")"
         )
     if "cost_growth_vs_linear" in ratios:
         g = ratios["cost_growth_vs_linear"]

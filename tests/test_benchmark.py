@@ -5,8 +5,10 @@ from __future__ import annotations
 import json
 import sys
 
+import pytest
 from support import cli
 
+from soft_snake_gym import benchmark
 from soft_snake_gym.benchmark import format_report, run_benchmark
 from soft_snake_gym.cli import main
 from soft_snake_gym.physics.cache import drop_stale_cache
@@ -114,3 +116,29 @@ def test_ppo_timing_runs_from_the_command_line_with_subprocess_workers(tmp_path)
     # the batched env's three training-throughput figures: stepping >= + inference, both > 0
     b = ppo["batched"]
     assert b["step_steps_per_s"] > 0 and b["inference_steps_per_s"] > 0
+
+
+def test_targets_are_read_off_the_default_rows_and_the_variants_are_reported_beside_them():
+    def row(case, steps, dt=0.01):
+        return {"case": case, "steps_per_s": steps, "sim_s_per_s": steps * dt}
+
+    res = {
+        "throughput": [
+            row("SoftEel-v0 batched n=256 threads=1", 30_000),
+            row("SoftEel-v0 batched n=256 threads=2", 60_000),
+            row("SoftEel-v0 batched n=256 threads=1, gait actions", 90_000),
+            row("SoftEel-v0 batched n=256 threads=2, bdf2", 80_000),
+            row("Swimmer-v5 gym.make", 10_000, 0.04),
+            row("EnvPool Swimmer-v4 n=256 threads=2", 20_000, 0.04),
+        ],
+        "ppo": [],
+        "nodes": [],
+    }
+    r = benchmark._ratios(res)
+    assert r["batched256_case"] == "SoftEel-v0 batched n=256 threads=2"
+    assert r["batched256_vs_swimmer"] == pytest.approx(1.5) and r["batched256_vs_envpool"] == pytest.approx(
+        0.75
+    )
+    assert r["batched256_gait_vs_swimmer"] == pytest.approx(2.25)
+    assert r["batched256_bdf2_vs_swimmer"] == pytest.approx(2.0)
+    assert r["batched256_bdf2_vs_envpool"] == pytest.approx(1.0)

@@ -40,6 +40,7 @@ CONFIGS = Path(__file__).resolve().parents[1] / "soft_snake_gym" / "configs" / "
         (lambda: Integrator(newton_chord_rate=-0.1), "Integrator.newton_chord_rate", "-0.1"),
         (lambda: SimConfig(medium="lava"), "SimConfig.medium", "lava"),
         (lambda: SimConfig(medium="ground", integrator=Integrator(method="sdirk2")), "ground", "sdirk2"),
+        (lambda: SimConfig(medium="ground", integrator=Integrator(method="bdf2")), "ground", "bdf2"),
     ],
 )
 def test_impossible_parameters_name_field_value_and_range(make, field, value):

@@ -47,14 +47,16 @@ N_PRM = 29
 ADDED_MASS_CONSISTENT, ADDED_MASS_KELASIDI = 0, 1
 
 MEDIUM_NONE, MEDIUM_WATER, MEDIUM_GROUND = 0, 1, 2
-METHOD_BACKWARD_EULER, METHOD_SYMPLECTIC_EULER, METHOD_SDIRK2 = 0, 1, 2
+METHOD_BACKWARD_EULER, METHOD_SYMPLECTIC_EULER, METHOD_SDIRK2, METHOD_BDF2 = 0, 1, 2, 3
 
 # --- scratch rows ----------------------------------------------------------------------------
 B_R, B_DV, B_F, B_Q0, B_V0, B_VACC, B_M, B_FEXT, B_KEYS, B_A, B_P0, B_VSTEP = range(12)
 # state, not scratch: the rest-length rates the length actuators have reached (the first N-1
 # entries; Rod.length_lag), kept between steps and zeroed by Simulator.reset
 B_LRATE = 12
-N_BUF = 13
+# state: the position at the start of the last step (BDF2's history; Simulator.set_state sets it)
+B_QPREV = 13
+N_BUF = 14
 I_PIV, I_ORDER, I_FRICTION, I_SWITCHES = 0, 1, 2, 3
 N_IBUF = 4
 SLIDING, STUCK = 0, 1

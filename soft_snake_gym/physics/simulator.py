@@ -28,6 +28,7 @@ _METHODS = {
     "backward_euler": L.METHOD_BACKWARD_EULER,
     "symplectic_euler": L.METHOD_SYMPLECTIC_EULER,
     "sdirk2": L.METHOD_SDIRK2,
+    "bdf2": L.METHOD_BDF2,
 }
 
 
@@ -271,6 +272,7 @@ class Simulator:
         )
         self.arrays.ibuf[L.I_FRICTION] = L.SLIDING
         self.arrays.buf[L.B_V0] = self.arrays.v  # the stepper's predictor starts from the current velocity
+        self.arrays.buf[L.B_QPREV] = np.nan  # no history: BDF2's next step is an SDIRK2 step
         self.failure = None
         # the energy ledger starts here: energies now, work and dissipation accumulated so far
         out = self.arrays.out

@@ -39,6 +39,7 @@ from soft_snake_gym.physics.layout import (
     B_M,
     B_P0,
     B_Q0,
+    B_QPREV,
     B_R,
     B_V0,
     B_VACC,
@@ -51,6 +52,7 @@ from soft_snake_gym.physics.layout import (
     MAX_SWITCHES,
     MEDIUM_GROUND,
     MEDIUM_WATER,
+    METHOD_BDF2,
     METHOD_SDIRK2,
     METHOD_SYMPLECTIC_EULER,
     NON_FINITE,
@@ -611,6 +613,37 @@ def _sdirk2_substep(s, dt, medium, u_k, u_l, damped):
 
 
 @njit(cache=True, error_model="numpy")
+def _bdf2_substep(s, dt, medium):
+    """One BDF2 step of ``dt``: a backward-Euler stage of ``2 dt / 3`` from ``(4 y_n - y_(n-1)) / 3``.
+
+    ``y`` is the position, the velocity and, with the consistent added mass, the water's
+    momentum; ``y_(n-1)`` is the last step's start (``buf[B_QPREV]``, ``buf[B_V0]``). Returns as
+    :func:`_be_newton`.
+    """
+    q, prm, buf, J = s.q, s.prm, s.buf, s.J
+    n = q.size
+    qprev, vprev = buf[B_QPREV], buf[B_VSTEP]
+    vprev[:] = buf[B_V0]
+    _be_start(s, medium, 1.0)
+    q0, v0 = buf[B_Q0], buf[B_V0]
+    if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
+        p0, p1 = buf[B_P0], buf[B_A]
+        p1[:] = 0.0
+        fluid_momentum(qprev, vprev, prm, p1, 1.0, 0.0, J, 0.0, False)
+        for i in range(n):
+            p0[i] += (p0[i] - p1[i]) / 3.0
+    for i in range(n):
+        qn, vn = q0[i], v0[i]
+        q0[i] += (qn - qprev[i]) / 3.0
+        v0[i] += (vn - vprev[i]) / 3.0
+        qprev[i] = qn
+        vprev[i] = vn
+    result = _be_newton(s, 2.0 * dt / 3.0, medium)
+    buf[B_V0, :] = vprev  # the step's start, for the next step's first guess and history
+    return result
+
+
+@njit(cache=True, error_model="numpy")
 def simulate(s, u_k, u_l, n_steps):
     """Advance one robot by ``n_steps`` steps of ``h`` with inputs held constant; stops at the first failure.
 
@@ -638,6 +671,7 @@ def simulate(s, u_k, u_l, n_steps):
     medium = int(prm[P_MEDIUM])
     symplectic = int(prm[P_METHOD]) == METHOD_SYMPLECTIC_EULER
     sdirk2 = int(prm[P_METHOD]) == METHOD_SDIRK2
+    bdf2 = int(prm[P_METHOD]) == METHOD_BDF2
     damped = prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0
     tau = prm[P_LAG]
     lrate = buf[B_LRATE, : lbar.size]  # the length actuators' rates (docs/model.md §3)
@@ -652,7 +686,9 @@ def simulate(s, u_k, u_l, n_steps):
         niter = 0
         resid = 0.0
         for _s in range(nsub):
-            if sdirk2:
+            if sdirk2 or (bdf2 and math.isnan(buf[B_QPREV, 0])):
+                # BDF2 starts from a fresh state (Simulator.set_state) with one SDIRK2 step
+                buf[B_QPREV, :] = q
                 status, it, res, ef, ed, efr, ea = _sdirk2_substep(s, dt, medium, u_k, u_l, damped)
             else:
                 # the inputs' work over the sub-step by the trapezoidal rule on P_act: exact for
@@ -671,7 +707,10 @@ def simulate(s, u_k, u_l, n_steps):
                         p_damp = damping_power(q, v, prm)
                     p_fluid, p_fric = _symplectic_substep(s, dt, medium)
                 else:
-                    status, it, res, p_fluid, p_fric = _be_substep(s, dt, medium, 1.0)
+                    if bdf2:
+                        status, it, res, p_fluid, p_fric = _bdf2_substep(s, dt, medium)
+                    else:
+                        status, it, res, p_fluid, p_fric = _be_substep(s, dt, medium, 1.0)
                     p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm)
                     if damped:
                         p_damp = damping_power(q, v, prm)
