@@ -1,9 +1,10 @@
 """Where a robot step's time goes: the compiled parts of one SoftEel-v0 step, timed inside numba.
 
 Drives 64 batched eels with uniform random actions (an untrained policy, the benchmark's
-load) and with the thesis gait, counts Newton iterations per step, then times each kernel of
-the step on a representative state in a compiled loop (no Python dispatch), and the Python
-side of ``gym.make("SoftEel-v0").step`` with cProfile.
+load) and with the thesis gait, counts Newton iterations per step, compares the water's
+integrators (CPU time per robot step of the batched env on one thread, interleaved rounds in
+this process), then times each kernel of the step on a representative state in a compiled
+loop (no Python dispatch), and the Python side of ``gym.make("SoftEel-v0").step`` with cProfile.
 
     python scripts/profile_step.py
 """
@@ -84,8 +85,38 @@ def newton_iterations(actions: str, robots: int = 64, steps: int = 300) -> np.nd
     return np.bincount(np.concatenate(its), minlength=6) / (steps * robots)
 
 
+def method_costs(methods=("sdirk2", "bdf2", "backward_euler"), robots=64, steps=150, rounds=11) -> None:
+    """Print CPU microseconds per robot step and Newton iterations per step of each water integrator.
+
+    64 batched eels on one thread under the same uniform random actions, each round from the
+    same seeded reset; medians of ``rounds`` rounds, the methods interleaved.
+    """
+    venvs = {
+        m: gym.make_vec("SoftEel-v0", num_envs=robots, num_threads=1, integrator={"method": m})
+        for m in methods
+    }
+    A = np.random.default_rng(0).uniform(-1, 1, (steps, robots, 8)).astype(np.float32)
+    cpu = {m: [] for m in methods}
+    its = {m: 0 for m in methods}
+    for _ in range(rounds + 1):  # the first round loads the compiled code
+        for m, venv in venvs.items():
+            venv.reset(seed=0)
+            start, n = time.thread_time(), 0
+            for a in A:
+                n += venv.step(a)[4]["newton_iterations"].sum()
+            cpu[m].append((time.thread_time() - start) / (steps * robots) * 1e6)
+            its[m] = n / (steps * robots)
+    base = float(np.median(cpu[methods[0]][1:]))
+    print(f"\nCPU per robot step, {robots} eels on one thread, random actions (medians of {rounds} rounds):")
+    for m in methods:
+        us = float(np.median(cpu[m][1:]))
+        print(
+            f"  {m:<16} {us:6.2f} us  {its[m]:.2f} Newton iterations per step  {base / us:.2f}x {methods[0]}"
+        )
+
+
 def main() -> None:
-    """Print the Newton-iteration histogram for random and for gait actions."""
+    """Print the Newton-iteration histograms, the integrators' costs, the parts' times, the Python profile."""
     for kind in ("random", "gait"):
         frac = newton_iterations(kind)
         mean = float(frac @ np.arange(frac.size))
@@ -93,6 +124,7 @@ def main() -> None:
             f"Newton iterations per step, {kind} actions: mean {mean:.2f}; "
             + ", ".join(f"{i}: {100 * f:.0f} %" for i, f in enumerate(frac) if f > 0)
         )
+    method_costs()
 
     env = gym.make("SoftEel-v0")
     env.reset(seed=0)
