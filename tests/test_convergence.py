@@ -100,6 +100,7 @@ def _result(values: dict[str, list[float]], medium: str = "water", failures=None
         env_id="X",
         policy="p",
         medium=medium,
+        method="sdirk2",
         factors=[4**i for i in range(n)],
         substeps=[4**i for i in range(n)],
         h=[0.01 / 4**i for i in range(n)],
@@ -196,8 +197,9 @@ def test_cli_prints_the_table_writes_json_and_exit_code_says_converged(capsys, t
     assert code == 0, out
     for label in ("distance", "friction energy", "actuator energy", "length error", "PASS", "converged"):
         assert label in out
+    assert "0.0025 s (backward_euler)" in out  # the ground's integrator, named
     data = json.loads(path.read_text())
-    assert data["ok"] and data["substeps"] == [1, 4]
+    assert data["ok"] and data["substeps"] == [1, 4] and data["method"] == "backward_euler"
     dist = data["metrics"]["distance"]["values"]
     assert f"{dist[0]:.4g}" in out and dist[0] > 0
     # the thesis preset (no damping) leaves the PID's closed loop to the step: exit code 1, FAIL
@@ -220,5 +222,6 @@ def test_cli_prints_the_table_writes_json_and_exit_code_says_converged(capsys, t
     )
     out = capsys.readouterr().out
     assert code == 1 and "FAIL" in out and "NOT converged" in out
+    assert "s (backward_euler);" in out  # the preset's integrator, not the default's
     code = main(["convergence", "SoftWorm-v0", "--policy", "inching:wave=sine,duty=0.5"])
     assert code == 2 and "duty" in capsys.readouterr().err

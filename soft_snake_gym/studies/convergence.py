@@ -151,6 +151,7 @@ class ConvergenceResult:
     Attributes:
         env_id, policy: what ran.
         medium: ``"water"`` or ``"ground"``.
+        method: the integrator that ran (``"sdirk2"``, ``"bdf2"``, ``"backward_euler"``, ...).
         substeps: internal steps per integrator step of each run (k * factor), ascending.
         factors: the refinement factors, ascending (the last one is the reference).
         h: integration step of each run [s].
@@ -162,6 +163,7 @@ class ConvergenceResult:
     env_id: str
     policy: str
     medium: str
+    method: str
     factors: list[int]
     substeps: list[int]
     h: list[float]
@@ -203,6 +205,7 @@ class ConvergenceResult:
             "env_id": self.env_id,
             "policy": self.policy,
             "medium": self.medium,
+            "method": self.method,
             "factors": self.factors,
             "substeps": self.substeps,
             "h": self.h,
@@ -261,7 +264,7 @@ def convergence(
     env = make_eval_env(env_id, seed=seed, env_kwargs=kwargs)
     inner = env.envs[0].unwrapped
     base_integrator, k = inner.settings.integrator, inner.sim.substeps
-    medium = inner.medium
+    medium, method = inner.medium, inner.sim.config.method
     if medium not in METRICS:
         raise ValueError(f"{env_id} runs in medium {medium!r}; convergence checks water or ground envs")
     make_convergence_policy(policy, env, seed)  # a bad spec fails before any episode runs
@@ -285,6 +288,7 @@ def convergence(
         env_id=env_id,
         policy=policy,
         medium=medium,
+        method=method,
         factors=factors,
         substeps=substeps,
         h=steps,
@@ -308,7 +312,7 @@ def format_convergence(result: ConvergenceResult) -> str:
     col = max(12, *(len(h) for h in head))
     lines = [
         f"{r.env_id}  policy={r.policy}: one episode at integration steps "
-        f"{', '.join(f'{h:.3g}' for h in r.h)} s; tolerance {100 * r.rtol:g} % ({r.medium}) of the "
+        f"{', '.join(f'{h:.3g}' for h in r.h)} s ({r.method}); tolerance {100 * r.rtol:g} % ({r.medium}) of the "
         "finest run, or the absolute one near zero",
         f"{'metric':<{width}}  {'unit':<4}  "
         + "  ".join(f"{h:>{col}}" for h in head)
