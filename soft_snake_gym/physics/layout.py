@@ -54,7 +54,8 @@ B_R, B_DV, B_F, B_Q0, B_V0, B_VACC, B_M, B_FEXT, B_KEYS, B_A, B_P0, B_VSTEP = ra
 # state, not scratch: the rest-length rates the length actuators have reached (the first N-1
 # entries; Rod.length_lag), kept between steps and zeroed by Simulator.reset
 B_LRATE = 12
-# state: the position at the start of the last step (BDF2's history; Simulator.set_state sets it)
+# state: the position at the start of the last step (BDF2's history; NaN, set by
+# Simulator.set_state, while there is none)
 B_QPREV = 13
 N_BUF = 14
 I_PIV, I_ORDER, I_FRICTION, I_SWITCHES = 0, 1, 2, 3
