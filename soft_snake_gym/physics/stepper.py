@@ -687,8 +687,8 @@ def simulate(s, u_k, u_l, n_steps):
         resid = 0.0
         for _s in range(nsub):
             if sdirk2 or (bdf2 and math.isnan(buf[B_QPREV, 0])):
-                # BDF2 starts from a fresh state (Simulator.set_state) with one SDIRK2 step
-                buf[B_QPREV, :] = q
+                if bdf2:  # a fresh state (Simulator.set_state): BDF2 starts with one SDIRK2 step
+                    buf[B_QPREV, :] = q
                 status, it, res, ef, ed, efr, ea = _sdirk2_substep(s, dt, medium, u_k, u_l, damped)
             else:
                 # the inputs' work over the sub-step by the trapezoidal rule on P_act: exact for
@@ -707,10 +707,9 @@ def simulate(s, u_k, u_l, n_steps):
                         p_damp = damping_power(q, v, prm)
                     p_fluid, p_fric = _symplectic_substep(s, dt, medium)
                 else:
-                    if bdf2:
-                        status, it, res, p_fluid, p_fric = _bdf2_substep(s, dt, medium)
-                    else:
-                        status, it, res, p_fluid, p_fric = _be_substep(s, dt, medium, 1.0)
+                    status, it, res, p_fluid, p_fric = (
+                        _bdf2_substep(s, dt, medium) if bdf2 else _be_substep(s, dt, medium, 1.0)
+                    )
                     p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm)
                     if damped:
                         p_damp = damping_power(q, v, prm)
