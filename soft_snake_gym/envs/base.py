@@ -15,6 +15,7 @@ import os
 import sys
 import warnings
 from collections import deque
+from operator import itemgetter
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -27,9 +28,12 @@ from soft_snake_gym.envs.settings import BaseSettings, resolve_settings
 from soft_snake_gym.envs.task import TaskArrays
 from soft_snake_gym.params import SimConfig, check_number
 from soft_snake_gym.physics import Simulator, body_from_curvature
-from soft_snake_gym.physics.layout import OK, STATUS_REASONS
+from soft_snake_gym.physics.layout import O_NITER, O_NSTEPS, OK, STATUS_REASONS, energy_ledger
 
 __all__ = ["SoftRobotEnv"]
+
+_STATE_ENTRIES = itemgetter(T.R_COMX, T.R_COMY, T.R_HEADING, T.R_P_MED, T.R_P_ACT)
+"""The state entries of ``info`` read from ``rs`` (a list, or rows over robots) in one call."""
 
 SLOW_SUBSTEPS = 1000
 """Explicit sub-steps per integrator step above which an env warns that it will be slow."""
@@ -128,7 +132,9 @@ class SoftRobotEnv(gym.Env):
             sim.set_config(self.base_config)
         self.sim = sim
         self.N = self.sim.N
-        h = s.integrator.h
+        h = self._h = s.integrator.h
+        # what step() reads besides the task arrays (views, stable for the env's life)
+        self._out, self._shape = sim.arrays.out, getattr(sim.arrays, self.shape_key)
         self.n_substeps = 1 if s.dt is None else int(round(s.dt / h))
         self.dt = h * self.n_substeps
         self.total_mass = float(self.sim.masses.sum())
@@ -223,32 +229,29 @@ class SoftRobotEnv(gym.Env):
             newton_iterations: Newton iterations of the last step.
             raw: the unclipped observation ``task.raw``.
         """
+        x, y, heading, p_medium, p_actuator = _STATE_ENTRIES(r)
         info = {
-            "x_position": r[T.R_COMX],
-            "y_position": r[T.R_COMY],
-            "heading": r[T.R_HEADING],
+            "x_position": x,
+            "y_position": y,
+            "heading": heading,
             "time": time,
-            self.medium_power_key: r[T.R_P_MED],
-            "actuator_power": r[T.R_P_ACT],
+            self.medium_power_key: p_medium,
+            "actuator_power": p_actuator,
         }
         info.update(self._shape_info(raw, shape))
         info["newton_iterations"] = newton_iterations
-        nav = r[T.R_NAV]
-        nav = nav.copy() if isinstance(nav, np.ndarray) else nav  # rows are reused for other entries
-        if self.task_kind == T.TASK_GOAL:
-            info["target_distance"] = nav
-        elif self.task_kind == T.TASK_PATH:
-            info["cross_track_error"] = nav
-        if self.task_kind != T.TASK_DIRECTION:  # SB3's convention, counted by its evaluation
-            success = r[T.R_SUCCESS]
+        if self.task_kind != T.TASK_DIRECTION:
+            nav = r[T.R_NAV]
+            nav = nav.copy() if isinstance(nav, np.ndarray) else nav  # rows are reused for other entries
+            info["target_distance" if self.task_kind == T.TASK_GOAL else "cross_track_error"] = nav
+            success = r[T.R_SUCCESS]  # SB3's convention, counted by its evaluation
             info["is_success"] = success > 0.0 if isinstance(success, np.ndarray) else bool(success > 0.0)
         return info
 
-    def _own_state_info(self, r: list[float]) -> dict[str, Any]:
-        sim = self.sim
-        return self.state_info(
-            r, sim.time, getattr(sim, self.shape_key), sim.newton_iterations, self.task.raw
-        )
+    def _own_state_info(self, r: list[float], out: list[float]) -> dict[str, Any]:
+        """This robot's state entries of ``info``, from ``rs`` and the simulator's ``out`` as lists."""
+        time = out[O_NSTEPS] * self._h
+        return self.state_info(r, time, self._shape.copy(), int(out[O_NITER]), self.task.raw)
 
     def _check_options(self, body: dict[str, np.ndarray]) -> None:
         """Reject an initial body from ``reset(options=...)`` that violates the env's bounds."""
@@ -304,7 +307,7 @@ class SoftRobotEnv(gym.Env):
         self._trail_com.clear()
         self._trail_head.clear()
         self._record_trail()
-        info = self._own_state_info(self.task.rs.tolist())
+        info = self._own_state_info(self.task.rs.tolist(), self._out.tolist())
         self._last_state_info = info.copy()
         info["randomized"] = dict(self.randomized)
         info["failure"] = None
@@ -353,8 +356,9 @@ class SoftRobotEnv(gym.Env):
             )
         ok = status == OK
         r = task.rs.tolist()
+        out = self._out.tolist()
         if ok:
-            info = self._own_state_info(r)
+            info = self._own_state_info(r, out)
             self._last_state_info = info.copy()
         else:  # the last valid state, in new arrays (returned data must not be shared)
             self.fail(STATUS_REASONS[status])
@@ -362,7 +366,7 @@ class SoftRobotEnv(gym.Env):
         info.update(T.reward_terms(r, self.term_keys))
         info["failure"] = self._failure
         info["metrics"] = T.episode_metrics(r, self.metric_keys)
-        info["energy"] = self.sim.energy_ledger()
+        info["energy"] = energy_ledger(out)
         if self.render_mode is not None and ok:
             self._record_trail()
         if self.render_mode == "human":

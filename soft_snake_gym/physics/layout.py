@@ -97,6 +97,12 @@ LEDGER_KEYS = (
 )
 N_OUT = 31  # simulated time is O_NSTEPS * h: derived, so it cannot drift
 
+
+def energy_ledger(out: list[float]) -> dict[str, float]:
+    """The energy ledger by name (:data:`LEDGER_KEYS`) from one robot's ``out`` as a list."""
+    return dict(zip(LEDGER_KEYS, out[O_LEDGER : O_LEDGER + N_LEDGER], strict=False))  # not strict: 8 of 31
+
+
 # --- status codes ----------------------------------------------------------------------------
 OK, NOT_CONVERGED, NON_FINITE, SELF_INTERSECTION, RUNAWAY_STRETCH, BAD_REST_LENGTH = range(6)
 STATUS_REASONS = (

@@ -447,9 +447,7 @@ class Simulator:
         the consistent added mass, as ``h`` under backward Euler and as ``h^2`` under SDIRK2.
         Work of :meth:`set_external_force` forces is not counted (it shows up in ``error``).
         """
-        return dict(
-            zip(L.LEDGER_KEYS, self.arrays.out[L.O_LEDGER : L.O_LEDGER + L.N_LEDGER].tolist(), strict=False)
-        )
+        return L.energy_ledger(self.arrays.out.tolist())
 
     def elastic_forces(self) -> np.ndarray:
         """Elastic plus damping forces on the nodes, (N, 2) [N]."""
