@@ -215,6 +215,7 @@ def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.utils import obs_as_tensor
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
@@ -235,6 +236,8 @@ def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict
     res: dict[str, Any] = {}
     try:
         model = PPO("MlpPolicy", env, seed=0, device="cpu", verbose=0, **ppo_kwargs)
+        # no log files: SB3's default logger would leave an empty /tmp/SB3-<date> per run
+        model.set_logger(Logger(folder=None, output_formats=[]))
         rollout = model.n_steps * n_envs
         model.learn(rollout)  # warm-up: workers started, kernels loaded, torch initialized
         timesteps = max(rollout, timesteps // rollout * rollout)

@@ -103,10 +103,13 @@ def test_stale_numba_cache_is_dropped_when_a_dependency_changes(tmp_path):
     assert not any(f.exists() for f in cached) and other.exists()
 
 
-def test_ppo_timing_runs_from_the_command_line_with_subprocess_workers(tmp_path):
+def test_ppo_timing_runs_from_the_command_line_with_subprocess_workers(tmp_path, monkeypatch):
     # `python -m soft_snake_gym.cli` runs a package __main__, which multiprocessing does not
     # re-import in SubprocVecEnv's workers: they must make the ids all the same
     out = tmp_path / "bench.json"
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp))  # the command's temporary directory, inherited
     args = ["--seconds", "0.05", "--repeats", "1", "--robots", "2", "--nodes", "--ppo-timesteps", "512"]
     proc = cli("benchmark", *args, "--json", str(out), "--quiet")
     assert proc.returncode == 0, proc.stderr
@@ -116,6 +119,8 @@ def test_ppo_timing_runs_from_the_command_line_with_subprocess_workers(tmp_path)
     # the batched env's three training-throughput figures: stepping >= + inference, both > 0
     b = ppo["batched"]
     assert b["step_steps_per_s"] > 0 and b["inference_steps_per_s"] > 0
+    # a timing run leaves no logs behind (SB3's default logger makes /tmp/SB3-<date> per learn())
+    assert not list(tmp.glob("SB3-*"))
 
 
 def test_targets_are_read_off_the_default_rows_and_the_variants_are_reported_beside_them():

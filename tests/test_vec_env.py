@@ -281,12 +281,14 @@ def test_sb3_adapter_matches_dummy_vec_env_of_single_envs():
 def test_sb3_ppo_trains_and_vecnormalize_and_evaluate_policy_run(tmp_path):
     from stable_baselines3 import PPO
     from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import VecNormalize
 
     from soft_snake_gym.sb3 import SoftVecEnv
 
     env = VecNormalize(SoftVecEnv("SoftEel-v0", n_envs=4, seed=0, max_episode_steps=64))
     model = PPO("MlpPolicy", env, n_steps=64, batch_size=128, n_epochs=2, seed=0, device="cpu")
+    model.set_logger(Logger(folder=None, output_formats=[]))  # no /tmp/SB3-<date> left behind
     before = [p.detach().clone() for p in model.policy.parameters()]
     model.learn(512)
     assert model.num_timesteps == 512
