@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 
 from soft_snake_gym import Integrator, Rod, SimConfig, SimulationError, Simulator, body_from_curvature
+from soft_snake_gym.envs import task as T
 from soft_snake_gym.physics import allocate_arrays
 
 
@@ -103,13 +106,29 @@ def test_simulator_over_given_arrays_uses_them_and_rejects_wrong_ones():
     sim = Simulator(arrays=stacked.row(1))
     sim.step(u_k=np.full(8, 0.5))
     assert np.array_equal(stacked.q[1], sim.x.ravel()) and not stacked.q[0].any()
-    assert sim.arrays.kbar.base is stacked.kbar and stacked.kbar[1, 0] == pytest.approx(0.005)
+    assert np.shares_memory(sim.arrays.kbar, stacked.kbar[1]) and stacked.kbar[1, 0] == pytest.approx(0.005)
     with pytest.raises(
         ValueError, match=r"arrays is SimArrays with q of shape \(2, 20\): need .* q of shape \(20,\)"
     ):
         Simulator(arrays=stacked)
     with pytest.raises(ValueError, match=r"arrays is tuple: need the SimArrays of one robot of N = 10"):
         Simulator(arrays=tuple(stacked.row(0)))
+
+
+@pytest.mark.parametrize("batch", [(), (3,)])
+def test_arrays_are_views_of_their_blocks_and_stay_so_when_pickled(batch):
+    # the single env's compiled step takes the blocks (SimArrays.f, TaskArrays.f), Python reads the
+    # named views: a copy of one without the other would let them drift apart silently
+    sim = allocate_arrays(10, batch)
+    task = T.allocate_task(10, 8, 25, batch, n_path=4)
+    for arrays in (sim, task):
+        for copy in (arrays, pickle.loads(pickle.dumps(arrays))):
+            fields = [a for name, a in copy._asdict().items() if a.dtype == np.float64 and name != "f"]
+            assert all(np.shares_memory(a, copy.f) for a in fields)
+            copy.f[...] = 0.0
+            fields[-1][..., -1] = 7.0  # the last view ends where its block ends
+            assert copy.f[..., -1].tolist() == np.full(batch, 7.0).tolist()
+    assert task.path.shape == batch + (4, 3) and task.obs.shape == batch + (25,)
 
 
 def test_bad_state_raises_clear_errors():

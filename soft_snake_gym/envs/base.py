@@ -133,8 +133,6 @@ class SoftRobotEnv(gym.Env):
         self.sim = sim
         self.N = self.sim.N
         h = self._h = s.integrator.h
-        # what step() reads besides the task arrays (views, stable for the env's life)
-        self._out, self._shape = sim.arrays.out, getattr(sim.arrays, self.shape_key)
         self.n_substeps = 1 if s.dt is None else int(round(s.dt / h))
         self.dt = h * self.n_substeps
         self.total_mass = float(self.sim.masses.sum())
@@ -164,8 +162,7 @@ class SoftRobotEnv(gym.Env):
         if task is None:
             task = T.allocate_task(self.N, self._act_shape[0], box.shape[0], n_path=self.n_path)
         self.task = task
-        # the compiled step's arguments, built once: plain tuples (see physics.layout)
-        self._kernel_args = (tuple(self.sim.arrays), tuple(task))
+        self._bind_arrays()
         task.low[:] = box.low
         task.high[:] = box.high
         task.w[:] = self._mass_fraction
@@ -189,6 +186,12 @@ class SoftRobotEnv(gym.Env):
         if self.task_kind != T.TASK_DIRECTION:
             self.metric_keys += T.NAV_METRIC_KEYS[self.task_kind]
             self.term_keys += T.NAV_TERM_KEYS
+
+    def _bind_arrays(self) -> None:
+        """Name what ``step`` passes to the compiled step and reads back (built once; again on unpickling)."""
+        a, task = self.sim.arrays, self.task
+        self._kernel_args = (a.f, a.ibuf, task.f, task.obs, task.act.shape[-1], task.path.shape[-2])
+        self._out, self._shape = a.out, getattr(a, self.shape_key)
 
     # --- hooks ------------------------------------------------------------------------------
     def _setup_task(self) -> None:
@@ -346,7 +349,7 @@ class SoftRobotEnv(gym.Env):
             act[:] = action
         else:
             act[:] = self._check_action(action)
-        status = T.robot_step(*self._kernel_args)
+        status = T.robot_step_blocks(*self._kernel_args)
         if status == T.BAD_ACTION:
             a = np.asarray(action, dtype=np.float64)
             bad = np.flatnonzero(~np.isfinite(a)).tolist()
@@ -436,7 +439,14 @@ class SoftRobotEnv(gym.Env):
         """The env's state for pickling, without the renderer (figures do not pickle)."""
         state = self.__dict__.copy()
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
+        for name in ("_kernel_args", "_out", "_shape"):  # views of the blocks: made again on loading
+            del state[name]
         return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Restore a pickled env; its arrays are views of the unpickled blocks again."""
+        self.__dict__.update(state)
+        self._bind_arrays()
 
     # --- helpers --------------------------------------------------------------------------
     def _check_action(self, action) -> np.ndarray:

@@ -2,14 +2,16 @@
 
 Action to inputs, physics step, observation, reward terms and running metrics, in one compiled call.
 
-``SoftEel-v0`` and ``SoftWorm-v0`` call :func:`robot_step` for their one robot; the batched
+``SoftEel-v0`` and ``SoftWorm-v0`` call :func:`robot_step` for their one robot (through
+:func:`robot_step_blocks`, which takes the arrays as the blocks they are views of); the batched
 vector env (:mod:`soft_snake_gym.envs.vector`) calls :func:`batch_step`, a ``prange`` loop of
 the same :func:`robot_step` over robots, so a robot's results are bitwise the same in both.
 Resets stay in Python (seeded noise, randomization draws) and end with :func:`robot_reset`.
 
 Per robot, the kernels take the simulator's :class:`~soft_snake_gym.physics.SimArrays` and the
 task's :class:`TaskArrays` (both stacked on a leading robot axis for :func:`batch_step`); Python
-passes them as plain tuples, which the kernels name on entry (see :mod:`soft_snake_gym.physics.layout`).
+passes them as plain tuples, which the kernels name on entry, or as their blocks, over which the
+kernels make the views again (see :mod:`soft_snake_gym.physics.layout`).
 Inside the kernels the task's scalars sit at named indices (``T_*`` in ``tp``, ``R_*`` and
 ``M_*`` in ``rs``), as the simulator's do; Python reads them by name through
 :func:`reward_terms` and :func:`episode_metrics`.
@@ -33,6 +35,7 @@ __all__ = [
     "TaskArrays",
     "allocate_task",
     "robot_step",
+    "robot_step_blocks",
     "robot_reset",
     "batch_step",
     "batch_step_serial",
@@ -147,6 +150,10 @@ METRIC_KEYS = (
 class TaskArrays(NamedTuple):
     """The task's arrays of one robot (or of ``n``, stacked on a leading axis), as the task kernels take them.
 
+    The float64 arrays are views of one block per robot, ``f`` (:func:`task_offsets`), as the
+    simulator's are (see :mod:`~soft_snake_gym.physics.layout`); a pickled ``TaskArrays`` keeps
+    them so.
+
     Attributes:
         tp: the task's constants at ``T_*`` (kind, action scale and bounds, control step, goal,
             reward weights, total mass), (N_TP,).
@@ -160,10 +167,11 @@ class TaskArrays(NamedTuple):
         w: mass fractions of the nodes, (N,) [-].
         low, high: bounds of the observation, (n_obs,).
         raw: the observation unclipped, float64, (n_obs,).
-        obs: the observation, float32, (n_obs,).
+        obs: the observation, float32, (n_obs,) (not in ``f``).
         path: the path to follow as a polyline (``TASK_PATH``): rows ``(x, y, s)``, a vertex [m]
             and its arc length from the first one [m], (n_path, 3); the first segment extends
             backwards and the last forwards without end.
+        f: the block the float64 arrays are views of, (``task_offsets(...)[-1]``,).
     """
 
     tp: np.ndarray
@@ -177,26 +185,78 @@ class TaskArrays(NamedTuple):
     raw: np.ndarray
     obs: np.ndarray
     path: np.ndarray
+    f: np.ndarray
 
     def row(self, i: int) -> TaskArrays:
         """Robot ``i`` of stacked arrays: views, so writes go to the batch."""
         return TaskArrays(*(a[i] for a in self))
 
+    def __reduce__(self):
+        """Pickle the blocks and rebuild the views on loading (numpy pickles a view as a copy of its own)."""
+        return task_arrays_over, (self.f, self.obs, self.act.shape[-1], self.path.shape[-2])
+
+
+@njit(cache=True)
+def task_offsets(N: int, n_act: int, n_obs: int, n_path: int) -> tuple[int, ...]:
+    """Where ``rs``, ``act``, ``uk``, ``ul``, ``w``, ``low``, ``high``, ``raw``, ``path`` start in a robot's block ``f``, and its size.
+
+    ``tp`` starts at 0. Compiled, so that the kernels and :func:`task_arrays_over` share it.
+    """
+    o_act = N_TP + N_RS
+    o_uk = o_act + n_act
+    o_ul = o_uk + N - 2
+    o_w = o_ul + N - 1
+    o_low = o_w + N
+    o_path = o_low + 3 * n_obs
+    return N_TP, o_act, o_uk, o_ul, o_w, o_low, o_low + n_obs, o_low + 2 * n_obs, o_path, o_path + 3 * n_path
+
+
+@njit(cache=True, inline="always")
+def task_views(f, obs, N, n_act, n_path):
+    """One robot's :class:`TaskArrays` over its block ``f`` and its ``obs`` (compiled code)."""
+    o_rs, o_act, o_uk, o_ul, o_w, o_low, o_high, o_raw, o_path, end = task_offsets(N, n_act, obs.size, n_path)
+    return TaskArrays(
+        f[:o_rs],
+        f[o_rs:o_act],
+        f[o_act:o_uk],
+        f[o_uk:o_ul],
+        f[o_ul:o_w],
+        f[o_w:o_low],
+        f[o_low:o_high],
+        f[o_high:o_raw],
+        f[o_raw:o_path],
+        obs,
+        f[o_path:end].reshape((n_path, 3)),
+        f,
+    )
+
+
+def task_arrays_over(f: np.ndarray, obs: np.ndarray, n_act: int, n_path: int) -> TaskArrays:
+    """:class:`TaskArrays` over blocks ``f`` (..., size) and ``obs`` (..., n_obs), any leading axes."""
+    lead, n_obs = f.shape[:-1], obs.shape[-1]
+    N = (f.shape[-1] - N_TP - N_RS - n_act - 3 * n_obs - 3 * n_path + 3) // 3
+    o_rs, o_act, o_uk, o_ul, o_w, o_low, o_high, o_raw, o_path, end = task_offsets(N, n_act, n_obs, n_path)
+    return TaskArrays(
+        f[..., :o_rs],
+        f[..., o_rs:o_act],
+        f[..., o_act:o_uk],
+        f[..., o_uk:o_ul],
+        f[..., o_ul:o_w],
+        f[..., o_w:o_low],
+        f[..., o_low:o_high],
+        f[..., o_high:o_raw],
+        f[..., o_raw:o_path],
+        obs,
+        f[..., o_path:end].reshape(lead + (n_path, 3)),
+        f,
+    )
+
 
 def allocate_task(N: int, n_act: int, n_obs: int, batch: tuple[int, ...] = (), n_path: int = 2) -> TaskArrays:
     """Zeroed :class:`TaskArrays` of ``batch`` robots of N nodes (paths of ``n_path`` vertices)."""
-    return TaskArrays(
-        tp=np.zeros(batch + (N_TP,)),
-        rs=np.zeros(batch + (N_RS,)),
-        act=np.zeros(batch + (n_act,)),
-        uk=np.zeros(batch + (N - 2,)),
-        ul=np.zeros(batch + (N - 1,)),
-        w=np.zeros(batch + (N,)),
-        low=np.zeros(batch + (n_obs,)),
-        high=np.zeros(batch + (n_obs,)),
-        raw=np.zeros(batch + (n_obs,)),
-        obs=np.zeros(batch + (n_obs,), dtype=np.float32),
-        path=np.zeros(batch + (n_path, 3)),
+    size = task_offsets(N, n_act, n_obs, n_path)[-1]
+    return task_arrays_over(
+        np.zeros(batch + (size,)), np.zeros(batch + (n_obs,), dtype=np.float32), n_act, n_path
     )
 
 
@@ -435,23 +495,23 @@ def robot_step(s, t):
 
 
 @njit(cache=True, error_model="numpy")
+def robot_step_blocks(sf, ibuf, tf, obs, n_act, n_path):
+    """:func:`robot_step` of one robot given by its blocks: what the single env calls.
+
+    The simulator's block ``sf`` and ``ibuf`` (``SimArrays.f``, ``.ibuf``), the task's ``tf`` and
+    ``obs`` (``TaskArrays.f``, ``.obs``), the action's and the path's sizes: four arrays for numba
+    to unbox instead of twenty (about 1 µs instead of 4 per call).
+    """
+    return robot_step(L.sim_views(sf, ibuf), task_views(tf, obs, ibuf.shape[1] // 2, n_act, n_path))
+
+
+@njit(cache=True, error_model="numpy")
 def _robot(s, t, i):
-    """Robot ``i``'s views of stacked simulator and task arrays."""
+    """Robot ``i``'s views of stacked simulator and task arrays (over its rows of the blocks)."""
+    N = s.ibuf.shape[-1] // 2
     return (
-        SimArrays(s.q[i], s.v[i], s.kbar[i], s.lbar[i], s.prm[i], s.buf[i], s.J[i], s.ibuf[i], s.out[i]),
-        TaskArrays(
-            t.tp[i],
-            t.rs[i],
-            t.act[i],
-            t.uk[i],
-            t.ul[i],
-            t.w[i],
-            t.low[i],
-            t.high[i],
-            t.raw[i],
-            t.obs[i],
-            t.path[i],
-        ),
+        L.sim_views(s.f[i], s.ibuf[i]),
+        task_views(t.f[i], t.obs[i], N, t.act.shape[-1], t.path.shape[-2]),
     )
 
 

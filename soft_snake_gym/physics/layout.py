@@ -7,12 +7,15 @@ nodes 1..N-2 (``kbar[j-1]`` at node j), rest lengths ``lbar`` (N-1) to the edges
 
 Parameters travel in one float64 vector ``prm`` (indices ``P_*``), per-robot scratch in
 ``buf`` (rows ``B_*``, each 2N long), integer scratch in ``ibuf`` (rows ``I_*``) and step
-diagnostics in ``out`` (indices ``O_*``). :class:`SimArrays` names the nine arrays of one robot
+diagnostics in ``out`` (indices ``O_*``). :class:`SimArrays` names the arrays of one robot
 (or, with a leading axis, of a batch); the kernels take it as one argument.
 
-Calls from Python pass ``tuple(arrays)`` and the kernel turns it back into ``SimArrays`` on
-entry (``SimArrays(*s)``, free in compiled code): numba's dispatcher types a plain tuple of
-arrays in C but a NamedTuple in Python, about 5 µs more per call, a fifth of a robot step.
+The float arrays are views of one block per robot, ``f`` (:func:`sim_offsets`), so that a
+step's hot calls pass two arrays, ``f`` and ``ibuf``, and rebuild the views in compiled code
+(:func:`sim_views`, free there): numba's dispatcher unboxes every array argument, about 0.2 µs
+each. Other calls from Python pass ``tuple(arrays)`` and the kernel turns it back into
+``SimArrays`` on entry (``SimArrays(*s)``): numba's dispatcher types a plain tuple of arrays in
+C but a NamedTuple in Python, about 5 µs more per call.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 from soft_snake_gym.physics.banded import WIDTH
 
@@ -118,7 +122,8 @@ STATUS_REASONS = (
 class SimArrays(NamedTuple):
     """The arrays of one robot's simulation (or of ``n`` robots, stacked on a leading axis).
 
-    As the kernels take them. numba passes a ``NamedTuple`` of arrays as one argument.
+    As the kernels take them. numba passes a ``NamedTuple`` of arrays as one argument. The float
+    arrays are views of ``f``; a pickled ``SimArrays`` keeps them so.
 
     Attributes:
         q: node positions, interleaved (x0, y0, x1, ...), (2N,) [m].
@@ -130,6 +135,7 @@ class SimArrays(NamedTuple):
         J: banded Jacobian / mass matrix, (2N, WIDTH) (see :mod:`~soft_snake_gym.physics.banded`).
         ibuf: integer scratch rows ``I_*`` (pivots, sort order, contact states), (N_IBUF, 2N).
         out: step diagnostics and the energy ledger at ``O_*``, (N_OUT,).
+        f: the block the float arrays are views of, (``sim_offsets(N)[-1]``,).
     """
 
     q: np.ndarray
@@ -141,22 +147,72 @@ class SimArrays(NamedTuple):
     J: np.ndarray
     ibuf: np.ndarray
     out: np.ndarray
+    f: np.ndarray
 
     def row(self, i: int) -> SimArrays:
         """Robot ``i`` of stacked arrays: views, so writes go to the batch."""
         return SimArrays(*(a[i] for a in self))
 
+    def __reduce__(self):
+        """Pickle the blocks and rebuild the views on loading (numpy pickles a view as a copy of its own)."""
+        return sim_arrays_over, (self.f, self.ibuf)
+
+
+@njit(cache=True)
+def sim_offsets(N: int) -> tuple[int, int, int, int, int, int, int, int]:
+    """Where ``v``, ``kbar``, ``lbar``, ``prm``, ``buf``, ``J``, ``out`` start in a robot's block ``f``, and its size.
+
+    ``q`` starts at 0. Compiled, so that the kernels and :func:`sim_arrays_over` share it.
+    """
+    n2 = 2 * N
+    o_kbar = 2 * n2
+    o_lbar = o_kbar + N - 2
+    o_prm = o_lbar + N - 1
+    o_buf = o_prm + N_PRM
+    o_J = o_buf + N_BUF * n2
+    o_out = o_J + n2 * WIDTH
+    return n2, o_kbar, o_lbar, o_prm, o_buf, o_J, o_out, o_out + N_OUT
+
+
+@njit(cache=True, inline="always")
+def sim_views(f, ibuf):
+    """One robot's :class:`SimArrays` over its block ``f`` and its ``ibuf`` (compiled code)."""
+    n2 = ibuf.shape[1]
+    o_v, o_kbar, o_lbar, o_prm, o_buf, o_J, o_out, end = sim_offsets(n2 // 2)
+    return SimArrays(
+        f[:o_v],
+        f[o_v:o_kbar],
+        f[o_kbar:o_lbar],
+        f[o_lbar:o_prm],
+        f[o_prm:o_buf],
+        f[o_buf:o_J].reshape((N_BUF, n2)),
+        f[o_J:o_out].reshape((n2, WIDTH)),
+        ibuf,
+        f[o_out:end],
+        f,
+    )
+
+
+def sim_arrays_over(f: np.ndarray, ibuf: np.ndarray) -> SimArrays:
+    """:class:`SimArrays` over blocks ``f`` (..., size) and ``ibuf`` (..., N_IBUF, 2N), any leading axes."""
+    lead, n2 = f.shape[:-1], ibuf.shape[-1]
+    o_v, o_kbar, o_lbar, o_prm, o_buf, o_J, o_out, end = sim_offsets(n2 // 2)
+    return SimArrays(
+        f[..., :o_v],
+        f[..., o_v:o_kbar],
+        f[..., o_kbar:o_lbar],
+        f[..., o_lbar:o_prm],
+        f[..., o_prm:o_buf],
+        f[..., o_buf:o_J].reshape(lead + (N_BUF, n2)),
+        f[..., o_J:o_out].reshape(lead + (n2, WIDTH)),
+        ibuf,
+        f[..., o_out:end],
+        f,
+    )
+
 
 def allocate_arrays(N: int, batch: tuple[int, ...] = ()) -> SimArrays:
-    """Zeroed :class:`SimArrays` of ``batch`` robots of N nodes (float64; ``ibuf`` int64)."""
-    return SimArrays(
-        q=np.zeros(batch + (2 * N,)),
-        v=np.zeros(batch + (2 * N,)),
-        kbar=np.zeros(batch + (N - 2,)),
-        lbar=np.zeros(batch + (N - 1,)),
-        prm=np.zeros(batch + (N_PRM,)),
-        buf=np.zeros(batch + (N_BUF, 2 * N)),
-        J=np.zeros(batch + (2 * N, WIDTH)),
-        ibuf=np.zeros(batch + (N_IBUF, 2 * N), dtype=np.int64),
-        out=np.zeros(batch + (N_OUT,)),
+    """Zeroed :class:`SimArrays` of ``batch`` robots of N nodes (float64 views of one block per robot; ``ibuf`` int64)."""
+    return sim_arrays_over(
+        np.zeros(batch + (sim_offsets(N)[-1],)), np.zeros(batch + (N_IBUF, 2 * N), dtype=np.int64)
     )
