@@ -172,7 +172,7 @@ def run(h) -> None:
 def _compiled_parts(part, u) -> None:
     """The compiled parts of an eel's step, on ``u``'s current state."""
     sa = SimArrays(*(a.copy() for a in u.sim.arrays))
-    q, v, kbar, lbar, prm, buf, J, ibuf, out = sa
+    q, v, kbar, lbar, prm, buf, J, ibuf, out = sa[:9]  # the named arrays (sa.f is their block)
     _loop_residual(1, sa, True)
     J0 = J.copy()
     piv = ibuf[layout.I_PIV].copy()

@@ -133,7 +133,7 @@ def main() -> None:
         env.step(a)
     u = env.unwrapped
     sa = SimArrays(*(a.copy() for a in u.sim.arrays))
-    q, v, kbar, lbar, prm, buf, J, ibuf, out = sa
+    q, v, kbar, lbar, prm, buf, J, ibuf, out = sa[:9]  # the named arrays (sa.f is their block)
     _loop_residual(1, sa, True)  # a Jacobian to factor
     piv = ibuf[layout.I_PIV].copy()
     Jw, b, bw = np.empty_like(J), np.ones(q.size), np.empty(q.size)
