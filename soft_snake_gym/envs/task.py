@@ -193,7 +193,7 @@ class TaskArrays(NamedTuple):
 
     def __reduce__(self):
         """Pickle the blocks and rebuild the views on loading (numpy pickles a view as a copy of its own)."""
-        return task_arrays_over, (self.f, self.obs, self.act.shape[-1], self.path.shape[-2])
+        return task_arrays_over, (self.f, self.obs, self.w.shape[-1], self.act.shape[-1], self.path.shape[-2])
 
 
 @njit(cache=True)
@@ -231,10 +231,9 @@ def task_views(f, obs, N, n_act, n_path):
     )
 
 
-def task_arrays_over(f: np.ndarray, obs: np.ndarray, n_act: int, n_path: int) -> TaskArrays:
-    """:class:`TaskArrays` over blocks ``f`` (..., size) and ``obs`` (..., n_obs), any leading axes."""
+def task_arrays_over(f: np.ndarray, obs: np.ndarray, N: int, n_act: int, n_path: int) -> TaskArrays:
+    """:class:`TaskArrays` of robots of N nodes over blocks ``f`` (..., size) and ``obs`` (..., n_obs), any leading axes."""
     lead, n_obs = f.shape[:-1], obs.shape[-1]
-    N = (f.shape[-1] - N_TP - N_RS - n_act - 3 * n_obs - 3 * n_path + 3) // 3
     o_rs, o_act, o_uk, o_ul, o_w, o_low, o_high, o_raw, o_path, end = task_offsets(N, n_act, n_obs, n_path)
     return TaskArrays(
         f[..., :o_rs],
@@ -256,7 +255,7 @@ def allocate_task(N: int, n_act: int, n_obs: int, batch: tuple[int, ...] = (), n
     """Zeroed :class:`TaskArrays` of ``batch`` robots of N nodes (paths of ``n_path`` vertices)."""
     size = task_offsets(N, n_act, n_obs, n_path)[-1]
     return task_arrays_over(
-        np.zeros(batch + (size,)), np.zeros(batch + (n_obs,), dtype=np.float32), n_act, n_path
+        np.zeros(batch + (size,)), np.zeros(batch + (n_obs,), dtype=np.float32), N, n_act, n_path
     )
 
 
