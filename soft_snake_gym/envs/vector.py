@@ -434,7 +434,8 @@ class SoftVectorEnv(VectorEnv):
             failure[i] = STATUS_REASONS[self._status[i]]
         infos["failure"], infos["_failure"] = failure, mask
         if any_stepped:
-            if not stepped.all():
+            if not stepped.all():  # a new array: the state entries are views of the rows
+                rows = rows.copy()
                 rows[T.R_FWD :, ~stepped] = 0.0
             mask = stepped.copy()
             for key, value in T.reward_terms(rows, self._proto.term_keys).items():
