@@ -14,7 +14,8 @@ numbers move with the load:
 (d) PPO training throughput with the batched env, as three figures (environment steps per
     second of raw stepping with random actions, of stepping plus the policy's inference, and
     of the full ``model.learn``), and ``model.learn`` with SB3's ``SubprocVecEnv`` at equal
-    ``n_envs`` (the package's ``SoftEel-v0`` PPO hyperparameters, ``VecNormalize``);
+    ``n_envs`` (the package's ``SoftEel-v0`` PPO hyperparameters, ``VecNormalize``), the two
+    models' rounds interleaved as the throughput cases' are;
 (e) cost per robot step of the batched env against the number of nodes N = 10, 20, 50, 100
     (the same 1.62 m, 7.2 kg body cut into N - 1 edges, swimming the thesis's serpenoid gait).
 
@@ -203,14 +204,23 @@ def _ppo_settings(env_id: str) -> tuple[int, dict[str, Any], dict[str, Any]]:
     return cfg.n_envs, {**cfg.hyperparams, "policy_kwargs": policy_kwargs(cfg)}, dict(cfg.env_kwargs)
 
 
-def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict[str, Any]:
-    """PPO's environment steps per second with the batched env or ``SubprocVecEnv``.
+def time_ppo(
+    env_id: str,
+    n_envs: int | None,
+    timesteps: int,
+    repeats: int,
+    kinds: tuple[str, ...] = ("batched", "subproc"),
+) -> list[dict[str, Any]]:
+    """PPO's environment steps per second with the batched env and with ``SubprocVecEnv``.
 
-    At the package's PPO settings for ``env_id``, after one warm-up rollout and update: the full
-    ``model.learn`` and, for the batched env, two parts of it (as Isaac Lab reports training
-    throughput): raw stepping of the ``VecNormalize``-wrapped env with random actions, and
-    stepping plus the policy's inference (its forward pass on each observation, as a rollout
-    does).
+    At the package's PPO settings for ``env_id``: one model per kind in ``kinds``, each after
+    one warm-up rollout and update, then ``repeats`` interleaved rounds of about
+    ``timesteps / repeats`` steps each (whole rollouts, at least one), so that a change of load
+    hits both kinds alike; each figure is the median round. A round times the full
+    ``model.learn`` and, for the batched env, first two parts of it (as Isaac Lab reports
+    training throughput): raw stepping of the ``VecNormalize``-wrapped env with random actions,
+    and stepping plus the policy's inference (its forward pass on each observation, as a
+    rollout does).
     """
     import torch
     from stable_baselines3 import PPO
@@ -226,52 +236,69 @@ def time_ppo(kind: str, env_id: str, n_envs: int | None, timesteps: int) -> dict
     cfg_envs, ppo_kwargs, env_kwargs = _ppo_settings(env_id)
     n_envs = n_envs or cfg_envs
     torch.set_num_threads(1)  # as soft_snake_gym.training does
-    if kind == "batched":
-        venv = SoftVecEnv(env_id, n_envs=n_envs, seed=0, **env_kwargs)
-    else:
-        venv = make_vec_env(
-            importable_id(env_id), n_envs=n_envs, seed=0, env_kwargs=env_kwargs, vec_env_cls=SubprocVecEnv
-        )
-    env = VecNormalize(venv)
-    res: dict[str, Any] = {}
+    models: dict[str, Any] = {}
+    envs = []
     try:
-        model = PPO("MlpPolicy", env, seed=0, device="cpu", verbose=0, **ppo_kwargs)
-        # no log files: SB3's default logger would leave an empty /tmp/SB3-<date> per run
-        model.set_logger(Logger(folder=None, output_formats=[]))
-        rollout = model.n_steps * n_envs
-        model.learn(rollout)  # warm-up: workers started, kernels loaded, torch initialized
-        timesteps = max(rollout, timesteps // rollout * rollout)
-        if kind == "batched":
-            steps = timesteps // n_envs
-            actions = np.random.default_rng(0).uniform(-1, 1, (steps, n_envs) + env.action_space.shape)
-            start = time.perf_counter()
-            for a in actions:
-                env.step(a)
-            res["step_steps_per_s"] = timesteps / (time.perf_counter() - start)
-            obs = env.reset()
-            low, high = env.action_space.low, env.action_space.high
-            start = time.perf_counter()
-            for _ in range(steps):
-                with torch.no_grad():
-                    act = model.policy(obs_as_tensor(obs, model.device))[0].numpy()
-                obs = env.step(np.clip(act, low, high))[0]
-            res["inference_steps_per_s"] = timesteps / (time.perf_counter() - start)
-        start = time.perf_counter()
-        model.learn(timesteps, reset_num_timesteps=False)
-        elapsed = time.perf_counter() - start
+        for kind in kinds:
+            if kind == "batched":
+                venv = SoftVecEnv(env_id, n_envs=n_envs, seed=0, **env_kwargs)
+            else:
+                venv = make_vec_env(
+                    importable_id(env_id),
+                    n_envs=n_envs,
+                    seed=0,
+                    env_kwargs=env_kwargs,
+                    vec_env_cls=SubprocVecEnv,
+                )
+            envs.append(VecNormalize(venv))
+            model = models[kind] = PPO("MlpPolicy", envs[-1], seed=0, device="cpu", **ppo_kwargs)
+            # no log files: SB3's default logger would leave an empty /tmp/SB3-<date> per run
+            model.set_logger(Logger(folder=None, output_formats=[]))
+            model.learn(model.n_steps * n_envs)  # warm-up: workers started, kernels loaded, torch initialized
+        rollout = models[kinds[0]].n_steps * n_envs
+        per_round = rollout * max(1, round(timesteps / (repeats * rollout)))
+        steps = per_round // n_envs
+        actions = np.random.default_rng(0).uniform(
+            -1, 1, (steps, n_envs) + models[kinds[0]].action_space.shape
+        )
+        rounds: dict[str, dict[str, list[float]]] = {kind: {} for kind in kinds}
+        for _ in range(repeats):
+            for kind, model in models.items():
+                rates = rounds[kind]
+                env = model.get_env()
+                if kind == "batched":
+                    start = time.perf_counter()
+                    for a in actions:
+                        env.step(a)
+                    rates.setdefault("step", []).append(per_round / (time.perf_counter() - start))
+                    obs = env.reset()
+                    low, high = env.action_space.low, env.action_space.high
+                    start = time.perf_counter()
+                    for _ in range(steps):
+                        with torch.no_grad():
+                            act = model.policy(obs_as_tensor(obs, model.device))[0].numpy()
+                        obs = env.step(np.clip(act, low, high))[0]
+                    rates.setdefault("inference", []).append(per_round / (time.perf_counter() - start))
+                start = time.perf_counter()
+                model.learn(per_round, reset_num_timesteps=False)
+                rates.setdefault("learn", []).append(per_round / (time.perf_counter() - start))
     finally:
-        env.close()
-    return {
-        "kind": kind,
-        "n_envs": n_envs,
-        "timesteps": timesteps,
-        "seconds": elapsed,
-        "steps_per_s": timesteps / elapsed,
-        **res,
-        "n_steps": ppo_kwargs.get("n_steps"),
-        "batch_size": ppo_kwargs.get("batch_size"),
-        "n_epochs": ppo_kwargs.get("n_epochs"),
-    }
+        for env in envs:
+            env.close()
+    rows = []
+    for kind, rates in rounds.items():
+        row = {
+            "kind": kind,
+            "n_envs": n_envs,
+            "timesteps": per_round * repeats,
+            "steps_per_s": statistics.median(rates["learn"]),
+            "rounds": rates["learn"],
+        }
+        if "step" in rates:
+            row["step_steps_per_s"] = statistics.median(rates["step"])
+            row["inference_steps_per_s"] = statistics.median(rates["inference"])
+        rows.append(row | {k: ppo_kwargs.get(k) for k in ("n_steps", "batch_size", "n_epochs")})
+    return rows
 
 
 # --- cost against N -------------------------------------------------------------------------
@@ -384,9 +411,8 @@ def run_benchmark(
 
     ppo_rows = []
     if ppo:
-        for kind in ("batched", "subproc"):
-            say(f"PPO with the {kind} env")
-            ppo_rows.append(time_ppo(kind, "SoftEel-v0", ppo_n_envs, ppo_timesteps))
+        say(f"PPO with the batched env and with SubprocVecEnv, {repeats} interleaved rounds")
+        ppo_rows = time_ppo("SoftEel-v0", ppo_n_envs, ppo_timesteps, repeats)
     node_rows = []
     for N in nodes:
         say(f"cost per step at N = {N}")
@@ -530,7 +556,10 @@ def format_report(res: dict[str, Any]) -> str:
                 lines.append(
                     f"{r['kind'] + ': stepping + policy inference':<42} {r['n_envs']:>7} {r['inference_steps_per_s']:>10,.0f}"
                 )
-            lines.append(f"{r['kind'] + ': model.learn':<42} {r['n_envs']:>7} {r['steps_per_s']:>10,.0f}")
+            rounds = " ".join(f"{x:.0f}" for x in r["rounds"])
+            lines.append(
+                f"{r['kind'] + ': model.learn':<42} {r['n_envs']:>7} {r['steps_per_s']:>10,.0f}  [{rounds}]"
+            )
     if res["nodes"]:
         lines += ["", f"{'N':>4} {'us/robot-step':>14} {'us/node-step':>13} {'Newton its':>11}"]
         for r in res["nodes"]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import statistics
 import sys
 
 import pytest
@@ -110,12 +111,15 @@ def test_ppo_timing_runs_from_the_command_line_with_subprocess_workers(tmp_path,
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     monkeypatch.setenv("TMPDIR", str(tmp))  # the command's temporary directory, inherited
-    args = ["--seconds", "0.05", "--repeats", "1", "--robots", "2", "--nodes", "--ppo-timesteps", "512"]
-    proc = cli("benchmark", *args, "--json", str(out), "--quiet")
+    args = ["--seconds", "0.05", "--repeats", "2", "--robots", "2", "--nodes", "--ppo-timesteps", "512"]
+    proc = cli("benchmark", *args, "--ppo-n-envs", "2", "--json", str(out), "--quiet")
     assert proc.returncode == 0, proc.stderr
     ppo = {r["kind"]: r for r in json.loads(out.read_text())["ppo"]}
     assert set(ppo) == {"batched", "subproc"}
-    assert all(r["steps_per_s"] > 0 for r in ppo.values())
+    # interleaved rounds of one rollout each (512 steps x 2 envs), the median reported
+    for r in ppo.values():
+        assert r["n_envs"] == 2 and r["timesteps"] == 2 * 1024 and len(r["rounds"]) == 2
+        assert min(r["rounds"]) > 0 and r["steps_per_s"] == statistics.median(r["rounds"])
     # the batched env's three training-throughput figures: stepping >= + inference, both > 0
     b = ppo["batched"]
     assert b["step_steps_per_s"] > 0 and b["inference_steps_per_s"] > 0
