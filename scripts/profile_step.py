@@ -1,10 +1,14 @@
-"""Where a robot step's time goes: the compiled parts of one SoftEel-v0 step, timed inside numba.
+"""Where a robot step's time goes: Newton's work per step and the compiled parts, timed inside numba.
 
 Drives 64 batched eels with uniform random actions (an untrained policy, the benchmark's
 load) and with the thesis gait, counts Newton iterations per step, compares the water's
 integrators (CPU time per robot step of the batched env on one thread, interleaved rounds in
-this process), then times each kernel of the step on a representative state in a compiled
-loop (no Python dispatch), and the Python side of ``gym.make("SoftEel-v0").step`` with cProfile.
+this process). Then, for SoftEel-v0 and SoftWorm-v0, counts Newton's work per robot step
+(``Simulator.newton_work``: Jacobian assemblies, residuals alone, factorizations, and the
+iterations, one solve each), times each kernel of the step on a representative state in a
+compiled loop (no Python dispatch), and accounts for the compiled step: counts times costs is
+Newton's share, the rest is the step's other work. Last, the Python side of
+``gym.make("SoftEel-v0").step`` with cProfile.
 
     python scripts/profile_step.py
 """
@@ -13,28 +17,25 @@ from __future__ import annotations
 
 import cProfile
 import io
-import math
 import pstats
 import time
 
 import gymnasium as gym
 import numpy as np
-from count_instructions import _loop_copy, _loop_factor  # scripts/ is on the path of a script
+from bench_envs import gait_actions  # scripts/ is on the path of a script
+from count_instructions import _loop_copy, _loop_factor, _loop_solve
 from numba import njit
 
 import soft_snake_gym  # noqa: F401 - registers the ids
-from soft_snake_gym.envs import observe
 from soft_snake_gym.envs import task as T
-from soft_snake_gym.gaits import serpenoid, serpenoid_phase
 from soft_snake_gym.physics import forces, layout, stepper
-from soft_snake_gym.physics.layout import SimArrays
 
 
 @njit
-def _loop_residual(k, sa, jac):
+def _loop_residual(k, sa, medium, jac):
     s = 0.0
     for _ in range(k):
-        s += stepper._be_residual(sa, 0.01, layout.MEDIUM_WATER, jac)[0]
+        s += stepper._be_residual(sa, 0.01, medium, jac)[0]
     return s
 
 
@@ -49,18 +50,33 @@ def _loop_check(k, q, v, kbar, lbar, uk, ul, prm, buf, ibuf):
 
 
 @njit
-def _loop_observe(k, q, v, kbar, w, low, high, raw, obs):
+def _loop_observe(k, sa, ta):
     s = 0.0
     for _ in range(k):
-        s += observe.swim_observation(q, v, kbar, w, 0.0, low, high, raw, obs)
+        s += T._observe(sa, ta)
     return s
 
 
 @njit
-def _loop_step(k, A, sa, ta):
+def _loop_step(k, A, sa, ta, f0, t0):
+    """``robot_step`` through the actions ``A``, back to the blocks ``f0``, ``t0`` at each pass."""
     for s in range(k):
-        ta.act[:] = A[s % A.shape[0]]
+        j = s % A.shape[0]
+        if j == 0:
+            sa.f[:] = f0
+            ta.f[:] = t0
+        ta.act[:] = A[j]
         T.robot_step(sa, ta)
+
+
+@njit
+def _loop_simulate(k, UK, UL, sa, f0):
+    """The physics alone: ``simulate`` with the rates ``robot_step`` made of the same actions."""
+    for s in range(k):
+        j = s % UK.shape[0]
+        if j == 0:
+            sa.f[:] = f0
+        stepper.simulate(sa, UK[j], UL[j], 1)
 
 
 def _us(fn, *args, k=20000) -> float:
@@ -70,19 +86,129 @@ def _us(fn, *args, k=20000) -> float:
     return (time.perf_counter() - start) / k * 1e6
 
 
+def _actions(env_id: str, kind: str, steps: int, robots: int) -> np.ndarray:
+    """(steps, robots, n_act) float32: uniform random in [-1, 1], or the thesis gait for every robot."""
+    env = gym.make(env_id)
+    if kind == "random":
+        return (
+            np.random.default_rng(0)
+            .uniform(-1, 1, (steps, robots) + env.action_space.shape)
+            .astype(np.float32)
+        )
+    return np.repeat(gait_actions(env, steps)[:, None, :], robots, axis=1)
+
+
 def newton_iterations(actions: str, robots: int = 64, steps: int = 300) -> np.ndarray:
     """Fraction of robot steps taking 0, 1, 2, ... Newton iterations, under random or gait actions."""
     venv = gym.make_vec("SoftEel-v0", num_envs=robots, num_threads=1)
     venv.reset(seed=0)
-    if actions == "random":
-        A = np.random.default_rng(0).uniform(-1, 1, (steps, robots, 8)).astype(np.float32)
-    else:
-        n, omega, alpha = 8, 2 * math.pi / 3, math.pi / 6
-        t = (np.arange(steps) + 0.5) * 0.01
-        r = np.array([serpenoid(serpenoid_phase(ti, n, omega, 2 * math.pi / n), omega, alpha)[1] for ti in t])
-        A = np.repeat((r / (2 * math.pi))[:, None, :], robots, axis=1).astype(np.float32)
-    its = [venv.step(a)[4]["newton_iterations"] for a in A]
+    its = [venv.step(a)[4]["newton_iterations"] for a in _actions("SoftEel-v0", actions, steps, robots)]
     return np.bincount(np.concatenate(its), minlength=6) / (steps * robots)
+
+
+def newton_work(
+    env_id: str, actions: str, robots: int = 64, steps: int = 200
+) -> tuple[dict[str, float], float]:
+    """Newton's work per robot step and the compiled call's wall-clock microseconds per robot step.
+
+    ``robots`` batched robots on one thread from a seeded reset; the work is ``Simulator.newton_work``
+    and the iterations (one solve each) of the robots that stepped, read after every step.
+    """
+    venv = gym.make_vec(env_id, num_envs=robots, num_threads=1)
+    venv.reset(seed=0)
+    A = _actions(env_id, actions, steps, robots)
+    for a in A[:5]:  # loads the compiled code
+        venv.step(a)
+    venv.reset(seed=0)
+    out = venv.batch.sim.out
+    work = dict.fromkeys(("jacobians", "residuals", "factorizations", "solves"), 0.0)
+    n, kernel = 0, venv.kernel_seconds
+    for a in A:
+        info = venv.step(a)[4]
+        stepped = info["_forward_speed"]  # the reward terms' mask: the robots stepped (not reset)
+        work["jacobians"] += out[stepped, layout.O_NJAC].sum()
+        work["residuals"] += out[stepped, layout.O_NRES].sum()
+        work["factorizations"] += out[stepped, layout.O_NFACTOR].sum()
+        work["solves"] += info["newton_iterations"][stepped].sum()
+        n += stepped.sum()
+    return {k: float(v) / n for k, v in work.items()}, (venv.kernel_seconds - kernel) / n * 1e6
+
+
+def compiled_parts(env_id: str) -> dict[str, float]:
+    """Microseconds per call of the step's kernels, on the state after 30 random steps of ``env_id``.
+
+    The whole step and the physics alone run 64 random actions from that state, over and over;
+    each kernel runs on that one state.
+    """
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    rng = np.random.default_rng(1)
+    for a in rng.uniform(-1, 1, (30,) + env.action_space.shape).astype(np.float32):
+        env.step(a)
+    u = env.unwrapped
+    medium = int(u.sim.arrays.prm[layout.P_MEDIUM])
+    n_act, n_path = u.task.act.size, u.task.path.shape[0]
+
+    def sim():  # views of a copy of the robot's blocks, as the kernels see them
+        return layout.sim_arrays_over(u.sim.arrays.f.copy(), u.sim.arrays.ibuf.copy())
+
+    def task():
+        return T.task_arrays_over(u.task.f.copy(), u.task.obs.copy(), u.N, n_act, n_path)
+
+    sa, ta = sim(), task()
+    f0, t0 = sa.f.copy(), ta.f.copy()
+    A = rng.uniform(-1, 1, (64, n_act))
+    UK, UL = np.empty((64, u.task.uk.size)), np.empty((64, u.task.ul.size))
+    for j, a in enumerate(A):  # the rates robot_step makes of the actions, for the physics alone
+        ta.act[:] = a
+        assert T.robot_step(sa, ta) == layout.OK
+        UK[j], UL[j] = ta.uk, ta.ul
+    q, v, kbar, lbar, prm, buf, J, ibuf, out = sa[:9]  # the named arrays (sa.f is their block)
+    _loop_residual(1, sa, medium, True)  # a Jacobian to factor
+    piv = ibuf[layout.I_PIV].copy()
+    Jw, b, bw = np.empty_like(J), np.ones(q.size), np.empty(q.size)
+    copy = _us(_loop_copy, J, Jw, b, bw)
+    factor_solve = _us(_loop_factor, J, Jw, piv, b, bw) - copy
+    _loop_factor(1, J, Jw, piv, b, bw)  # Jw: the factors, for the solves alone
+    solve = _us(_loop_solve, Jw, piv, b, bw)  # with its right-hand side's copy (20 numbers)
+    return {
+        "whole robot_step (random actions)": _us(_loop_step, A, sim(), task(), f0, t0, k=6400),
+        "physics alone (simulate, same steps)": _us(_loop_simulate, UK, UL, sim(), f0, k=6400),
+        "residual + Jacobian": _us(_loop_residual, sim(), medium, True),
+        "residual alone": _us(_loop_residual, sim(), medium, False),
+        "banded factorization": factor_solve - solve,
+        "banded solve": solve,
+        "state check + actuator power": _us(
+            _loop_check, q, v, kbar, lbar, u.task.uk, u.task.ul, prm, buf.copy(), ibuf.copy()
+        ),
+        "observation": _us(_loop_observe, sim(), task()),
+    }
+
+
+def account(env_id: str) -> None:
+    """Print the parts' costs, Newton's work per step, and how much of the compiled step Newton is."""
+    parts = compiled_parts(env_id)
+    print(f"\n{env_id}: compiled parts, microseconds per call (in a compiled loop, no dispatch):")
+    for name, us in parts.items():
+        print(f"  {name:<40} {us:7.2f}")
+    task = parts["whole robot_step (random actions)"] - parts["physics alone (simulate, same steps)"]
+    print(f"  the task's own work (rates, observation, reward, metrics): {task:.2f} us a step")
+    cost = {
+        "jacobians": parts["residual + Jacobian"],
+        "residuals": parts["residual alone"],
+        "factorizations": parts["banded factorization"],
+        "solves": parts["banded solve"],
+    }
+    for kind in ("random", "gait"):
+        work, step = newton_work(env_id, kind)
+        newton = sum(work[k] * cost[k] for k in cost)
+        print(f"  Newton's work per robot step, {kind} actions (64 robots, one thread):")
+        for k in cost:
+            print(f"    {k:<16} {work[k]:5.2f} x {cost[k]:5.2f} us = {work[k] * cost[k]:6.2f} us")
+        print(
+            f"    Newton {newton:.2f} us of the compiled step's {step:.2f} us ({100 * newton / step:.0f} %); "
+            f"the rest, by difference, {step - newton:.2f} us"
+        )
 
 
 def method_costs(methods=("sdirk2", "bdf2", "backward_euler"), robots=64, steps=150, rounds=11) -> None:
@@ -126,43 +252,12 @@ def main() -> None:
         )
     method_costs()
 
+    for env_id in ("SoftEel-v0", "SoftWorm-v0"):
+        account(env_id)
+
     env = gym.make("SoftEel-v0")
     env.reset(seed=0)
     rng = np.random.default_rng(1)
-    for a in rng.uniform(-1, 1, (30, 8)).astype(np.float32):
-        env.step(a)
-    u = env.unwrapped
-    sa = SimArrays(*(a.copy() for a in u.sim.arrays))
-    q, v, kbar, lbar, prm, buf, J, ibuf, out = sa[:9]  # the named arrays (sa.f is their block)
-    _loop_residual(1, sa, True)  # a Jacobian to factor
-    piv = ibuf[layout.I_PIV].copy()
-    Jw, b, bw = np.empty_like(J), np.ones(q.size), np.empty(q.size)
-    A = rng.uniform(-1, 1, (64, 8))
-    parts = {
-        "whole robot_step (random actions)": _us(
-            _loop_step,
-            A,
-            SimArrays(*(a.copy() for a in sa)),
-            type(u.task)(*(a.copy() for a in u.task)),
-            k=5000,
-        ),
-        "residual + Jacobian (assemble, drag, added mass)": _us(
-            _loop_residual, SimArrays(*(a.copy() for a in sa)), True
-        ),
-        "residual only (line-search trial)": _us(_loop_residual, SimArrays(*(a.copy() for a in sa)), False),
-        "banded factor + solve (2N = 20, KL = KU = 5)": _us(_loop_factor, J, Jw, piv, b, bw)
-        - _us(_loop_copy, J, Jw, b, bw),
-        "state check + actuator power": _us(
-            _loop_check, q, v, kbar, lbar, u.task.uk, u.task.ul, prm, buf.copy(), ibuf.copy()
-        ),
-        "observation (kappa, kappa_dot, kbar, body velocity)": _us(
-            _loop_observe, q, v, kbar, u.task.w, u.task.low, u.task.high, u.task.raw.copy(), u.task.obs.copy()
-        ),
-    }
-    print("\nCompiled parts, microseconds per call (in a compiled loop, no dispatch):")
-    for name, us in parts.items():
-        print(f"  {name:<55} {us:7.2f}")
-
     pr = cProfile.Profile()
     acts = rng.uniform(-1, 1, (3000, 8)).astype(np.float32)
     pr.enable()

@@ -205,3 +205,41 @@ def test_chord_steps_reach_the_full_newton_step_to_the_tolerance():
     # each step converges to |R|/m <= 1e-6 m/s either way: the states agree to that order
     assert np.abs(chord.x - full.x).max() < 1e-7  # 8e-9 m here
     assert np.abs(chord.v - full.v).max() < 1e-6  # 2e-8 m/s here, on speeds of 0.2 m/s
+
+
+def _work(sim, inputs, ground=False) -> np.ndarray:
+    """(steps, 4): iterations, Jacobian assemblies, residuals alone, factorizations per step."""
+    rows = []
+    for u in inputs:
+        assert sim.step(None, u) if ground else sim.step(u_k=u), sim.failure
+        w = sim.newton_work
+        rows.append((sim.newton_iterations, w["jacobians"], w["residuals"], w["factorizations"]))
+    return np.array(rows)
+
+
+def test_newton_work_counts_the_jacobians_residuals_and_factorizations_of_each_step():
+    """``Simulator.newton_work`` follows Newton's structure step by step (docs/performance.md)."""
+    rng = np.random.default_rng(3)
+    inputs = rng.uniform(-3, 3, (60, 8))
+    start = body_from_curvature(np.full(8, 0.2), Simulator(SimConfig()).lbar)
+    work = {}
+    for chord in (0.0, 0.1):
+        sim = Simulator(SimConfig(integrator=Integrator(newton_chord_rate=chord)))
+        sim.reset(x=start)
+        work[chord] = _work(sim, inputs)
+    # full Newton: every iteration assembles a Jacobian, factors it, solves and tries one step
+    its, jac, res, fac = work[0.0].T
+    assert (jac == its).all() and (fac == its).all() and (res == its).all()
+    # chord steps: each of SDIRK2's two stages assembles and factors a Jacobian, later iterations reuse it
+    its, jac, res, fac = work[0.1].T
+    assert (jac >= 2).all() and (fac == jac).all() and (res == its).all()
+    assert its.sum() > fac.sum()
+    # on the ground every iteration factors the Jacobian its full step's trial assembled (no chord steps)
+    sim = Simulator(SimConfig(medium="ground"))
+    sim.reset()
+    its, jac, res, fac = _work(sim, rng.uniform(-0.05, 0.05, (100, sim.N - 1)), ground=True).T
+    assert (fac == its).all() and (jac >= fac).all() and its.sum() > 0
+    # the explicit integrator has no Newton
+    sim = Simulator(SimConfig(integrator=Integrator(method="symplectic_euler")))
+    sim.reset(x=start)
+    assert not _work(sim, inputs[:3]).any()

@@ -99,12 +99,15 @@ LEDGER_KEYS = (
     "delta_fluid_kinetic",
     "error",
 )
-N_OUT = 31  # simulated time is O_NSTEPS * h: derived, so it cannot drift
+# Newton's work in the last step (summed over its stages and sub-steps): Jacobian assemblies (each
+# with its residual), residuals alone (line-search trials, chord steps) and factorizations
+O_NJAC, O_NRES, O_NFACTOR = 31, 32, 33
+N_OUT = 34  # simulated time is O_NSTEPS * h: derived, so it cannot drift
 
 
 def energy_ledger(out: list[float]) -> dict[str, float]:
     """The energy ledger by name (:data:`LEDGER_KEYS`) from one robot's ``out`` as a list."""
-    return dict(zip(LEDGER_KEYS, out[O_LEDGER : O_LEDGER + N_LEDGER], strict=False))  # not strict: 8 of 31
+    return dict(zip(LEDGER_KEYS, out[O_LEDGER : O_LEDGER + N_LEDGER], strict=False))  # not strict: 8 of N_OUT
 
 
 # --- status codes ----------------------------------------------------------------------------

@@ -486,6 +486,20 @@ class Simulator:
         return int(self.arrays.out[L.O_NITER])
 
     @property
+    def newton_work(self) -> dict[str, int]:
+        """What Newton did in the last step, summed over its stages and sub-steps (0s if explicit).
+
+        ``jacobians``: Jacobian assemblies, each with its residual; ``residuals``: residuals
+        alone (line-search trials and chord steps); ``factorizations``: banded factorizations.
+        """
+        out = self.arrays.out
+        return {
+            "jacobians": int(out[L.O_NJAC]),
+            "residuals": int(out[L.O_NRES]),
+            "factorizations": int(out[L.O_NFACTOR]),
+        }
+
+    @property
     def fluid_power(self) -> float:
         """Power lost to drag over the last step, ``-sum F_D . v >= 0`` [W]."""
         return float(self.arrays.out[L.O_P_FLUID])

@@ -71,7 +71,10 @@ from soft_snake_gym.physics.layout import (
     O_L0_T_FLUID,
     O_L0_W_ACT,
     O_LEDGER,
+    O_NFACTOR,
     O_NITER,
+    O_NJAC,
+    O_NRES,
     O_NSTEPS,
     O_P_ACT,
     O_P_DAMP,
@@ -159,10 +162,11 @@ def _be_residual(s, dt, medium, jac):
     momentum form, ``R = M (v - v0) + P_f(q, v) - P_f(q0, v0) - dt (F(q, v) + dT_f/dx(q, v))``
     (``P_f(q0, v0)`` in ``buf[B_P0]``); with ``added_mass = "kelasidi"``,
     ``R = (M + M_A(q)) (v - v0) - dt F(q, v)``. Returns (squared 2-norm, max-norm of R/m [m/s],
-    fluid power, friction power).
+    fluid power, friction power). Counts itself in ``out[O_NJAC]`` or ``out[O_NRES]``.
     """
     q, v, kbar, lbar, prm, buf, J, ibuf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.J, s.ibuf
     n = q.size
+    s.out[O_NJAC if jac else O_NRES] += 1.0
     q0, v0, F, R, m = buf[B_Q0], buf[B_V0], buf[B_F], buf[B_R], buf[B_M]
     fext = buf[B_FEXT]
     dv = buf[B_A]
@@ -418,6 +422,7 @@ def _be_newton(s, dt, medium):
         pass_it += 1
         chord = factored
         if not factored:
+            s.out[O_NFACTOR] += 1.0
             if not band_factor(J, piv, n, PIVOT_THRESHOLD):
                 return NOT_CONVERGED, it, rmax, p_fluid, p_fric
             factored = True
@@ -685,6 +690,7 @@ def simulate(s, u_k, u_l, n_steps):
         e_damp = 0.0
         niter = 0
         resid = 0.0
+        out[O_NJAC] = out[O_NRES] = out[O_NFACTOR] = 0.0
         for _s in range(nsub):
             if sdirk2 or (bdf2 and math.isnan(buf[B_QPREV, 0])):
                 if bdf2:  # a fresh state (Simulator.set_state): BDF2 starts with one SDIRK2 step
