@@ -13,7 +13,8 @@ package's own arithmetic:
 2. The same forces with the water's drag and the drag power (``assemble(water=True)``), the
    drag split the same way.
 3. The forces with their Jacobian (``assemble(jac=True)``), the split carried on to the band:
-   each node's quantities into scratch rows, then one loop per band entry.
+   each node's quantities into scratch rows, then one loop per band entry; over the whole batch,
+   and over blocks of 4, 8 and 16 robots (every array (blocks, ..., lanes), a block's band in L1).
 4. The Newton step's linear algebra: each robot's backward-Euler Jacobian (water, h = 0.01 s)
    factored and solved by ``band_factor`` and ``band_solve``, robot by robot, and with the
    robot index innermost without row exchanges (a robot that would need one is flagged, to be
@@ -42,6 +43,9 @@ from numba import njit
 import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.physics import banded, forces, layout, stepper
 from soft_snake_gym.physics.banded import KL, KU, PIVOT_THRESHOLD
+
+BLOCK_LANES = (4, 8, 16)
+"""Robots per block of :func:`blocked_jacobian` (AVX2 holds 4 doubles)."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -258,91 +262,110 @@ def split_jacobian(q, v, kbar, lbar, EA, EI, d, db, F, J, T, cx, cv, reps):
     Into the band ``J`` (n, width, robots), with each node's quantities in scratch rows ``T``
     and one loop per band entry.
     """
-    n2, R = q.shape
     for _ in range(reps):
         split(q, v, kbar, lbar, EA, EI, d, db, F, 1)
-        J[:, :, :] = 0.0
-        for k in range(n2 // 2 - 1):
-            for r in range(R):
-                ex = q[2 * k + 2, r] - q[2 * k, r]
-                ey = q[2 * k + 3, r] - q[2 * k + 1, r]
-                l = math.sqrt(ex * ex + ey * ey)
-                tx, ty = ex / l, ey / l
-                lb = lbar[k, r]
-                f = -EA[r] * (l / lb - 1.0)
-                dvx, dvy = v[2 * k + 2, r] - v[2 * k, r], v[2 * k + 3, r] - v[2 * k + 1, r]
-                ldot = tx * dvx + ty * dvy
-                f -= d[r] * ldot
-                a1, a2 = EA[r] / lb, -f / l
-                T[_S, r] = cx * (a1 * tx * tx + a2 * (1.0 - tx * tx)) + cv * d[r] * tx * tx
-                T[_S + 1, r] = cx * (a1 - a2) * tx * ty + cv * d[r] * tx * ty
-                T[_S + 2, r] = cx * (a1 * ty * ty + a2 * (1.0 - ty * ty)) + cv * d[r] * ty * ty
-                px, py = cx * d[r] * (dvx - ldot * tx) / l, cx * d[r] * (dvy - ldot * ty) / l
-                T[_TS, r], T[_TS + 1, r], T[_TS + 2, r], T[_TS + 3, r] = tx * px, tx * py, ty * px, ty * py
-            # add_edge_pattern, then the damping blocks: per entry in assemble's order
-            for i, j, sign in ((k, k, -1.0), (k, k + 1, 1.0), (k + 1, k, 1.0), (k + 1, k + 1, -1.0)):
-                row, col = 2 * i, 2 * j - 2 * i + KL
-                _scatter_row(J, row, col, T, _S, sign)
-                _scatter_row(J, row, col + 1, T, _S + 1, sign)
-                _scatter_row(J, row + 1, col - 1, T, _S + 1, sign)
-                _scatter_row(J, row + 1, col, T, _S + 2, sign)
-            for i, j, sign in ((k, k, -1.0), (k, k + 1, 1.0), (k + 1, k, 1.0), (k + 1, k + 1, -1.0)):
-                row, col = 2 * i, 2 * j - 2 * i + KL
-                for m in range(4):
-                    _scatter_row(J, row + m // 2, col + m % 2 - m // 2, T, _TS + m, sign)
-        for j in range(1, n2 // 2 - 1):
-            for r in range(R):
-                kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = _turning(q, j, r)
-                kb = EI[r] / (0.5 * (lbar[j - 1, r] + lbar[j, r]))
-                dk = kap - kbar[j - 1, r]
-                w = 1.0 + 0.25 * kap * kap
-                phidot = _turning_rate(v, j, r, g0x, g0y, g1x, g1y, g2x, g2y)
-                dbr = db[r]
-                s2 = kb * (w * w + dk * 0.5 * kap * w) + dbr * w * w * kap * phidot
-                T[_ALPHA, r] = -(cx * s2 + cv * dbr * w * w)
-                T[_BETA, r] = -cx * (kb * dk * w + dbr * w * w * phidot)
-                T[_C, r] = -cx * dbr * w * w
-                T[_G, r], T[_G + 1, r], T[_G + 2, r], T[_G + 3, r] = g0x, g0y, g1x, g1y
-                T[_G + 4, r], T[_G + 5, r] = g2x, g2y
-                ia, ib = 1.0 / (la * la), 1.0 / (lbn * lbn)
-                ha00, ha01, ha11 = 2.0 * tax * tay * ia, (tay * tay - tax * tax) * ia, -2.0 * tax * tay * ia
-                hb00, hb01, hb11 = 2.0 * tbx * tby * ib, (tby * tby - tbx * tbx) * ib, -2.0 * tbx * tby * ib
-                T[_HA, r], T[_HA + 1, r], T[_HA + 2, r] = ha00, ha01, ha11
-                T[_HB, r], T[_HB + 1, r], T[_HB + 2, r] = hb00, hb01, hb11
-                T[_HD, r], T[_HD + 1, r], T[_HD + 2, r] = hb00 - ha00, hb01 - ha01, hb11 - ha11
-                ux, uy = v[2 * j, r] - v[2 * j - 2, r], v[2 * j + 1, r] - v[2 * j - 1, r]
-                wx, wy = v[2 * j + 2, r] - v[2 * j, r], v[2 * j + 3, r] - v[2 * j + 1, r]
-                r0x, r0y = ha00 * ux + ha01 * uy, ha01 * ux + ha11 * uy
-                r2x, r2y = hb00 * wx + hb01 * wy, hb01 * wx + hb11 * wy
-                T[_RV, r], T[_RV + 1, r], T[_RV + 4, r], T[_RV + 5, r] = r0x, r0y, r2x, r2y
-                T[_RV + 2, r], T[_RV + 3, r] = -r0x - r2x, -r0y - r2y
-            # the damping blocks (a, b) = c g_a r_b^T, nodes a, b in j-1 .. j+1
-            for ai in range(3):
-                for bi in range(3):
-                    row, col = 2 * (j - 1 + ai), 2 * (bi - ai) + KL
-                    gx, gy, rx, ry = _G + 2 * ai, _G + 2 * ai + 1, _RV + 2 * bi, _RV + 2 * bi + 1
-                    _scatter(J, row, col, T, _C, gx, rx, 1.0)
-                    _scatter(J, row, col + 1, T, _C, gx, ry, 1.0)
-                    _scatter(J, row + 1, col - 1, T, _C, gy, rx, 1.0)
-                    _scatter(J, row + 1, col, T, _C, gy, ry, 1.0)
-            # the blocks alpha g_a g_b^T + beta (edge-angle Hessians), in assemble's order
-            for ai, bi, h, sign in (
-                (0, 0, _HA, -1.0),
-                (0, 1, _HA, 1.0),
-                (1, 0, _HA, 1.0),
-                (0, 2, _HA, 0.0),
-                (2, 0, _HA, 0.0),
-                (1, 1, _HD, 1.0),
-                (1, 2, _HB, -1.0),
-                (2, 1, _HB, -1.0),
-                (2, 2, _HB, 1.0),
-            ):
+        _lanes_jacobian(q, v, kbar, lbar, EA, EI, d, db, J, T, cx, cv)
+
+
+@njit(cache=True, error_model="numpy")
+def blocked_jacobian(q, v, kbar, lbar, EA, EI, d, db, F, J, T, cx, cv, reps):
+    """The same over blocks of a few robots: every array (blocks, ..., lanes), one block at a time.
+
+    A block's band (n, width, lanes) and scratch rows stay in the L1 cache, where the whole
+    batch's band (:func:`split_jacobian`) outgrows it.
+    """
+    for _ in range(reps):
+        for b in range(q.shape[0]):
+            split(q[b], v[b], kbar[b], lbar[b], EA[b], EI[b], d[b], db[b], F[b], 1)
+            _lanes_jacobian(q[b], v[b], kbar[b], lbar[b], EA[b], EI[b], d[b], db[b], J[b], T, cx, cv)
+
+
+@njit(cache=True, error_model="numpy")
+def _lanes_jacobian(q, v, kbar, lbar, EA, EI, d, db, J, T, cx, cv):
+    """``assemble``'s Jacobian of the internal forces with robots innermost, into the band ``J``."""
+    n2, R = q.shape
+    J[:, :, :] = 0.0
+    for k in range(n2 // 2 - 1):
+        for r in range(R):
+            ex = q[2 * k + 2, r] - q[2 * k, r]
+            ey = q[2 * k + 3, r] - q[2 * k + 1, r]
+            l = math.sqrt(ex * ex + ey * ey)
+            tx, ty = ex / l, ey / l
+            lb = lbar[k, r]
+            f = -EA[r] * (l / lb - 1.0)
+            dvx, dvy = v[2 * k + 2, r] - v[2 * k, r], v[2 * k + 3, r] - v[2 * k + 1, r]
+            ldot = tx * dvx + ty * dvy
+            f -= d[r] * ldot
+            a1, a2 = EA[r] / lb, -f / l
+            T[_S, r] = cx * (a1 * tx * tx + a2 * (1.0 - tx * tx)) + cv * d[r] * tx * tx
+            T[_S + 1, r] = cx * (a1 - a2) * tx * ty + cv * d[r] * tx * ty
+            T[_S + 2, r] = cx * (a1 * ty * ty + a2 * (1.0 - ty * ty)) + cv * d[r] * ty * ty
+            px, py = cx * d[r] * (dvx - ldot * tx) / l, cx * d[r] * (dvy - ldot * ty) / l
+            T[_TS, r], T[_TS + 1, r], T[_TS + 2, r], T[_TS + 3, r] = tx * px, tx * py, ty * px, ty * py
+        # add_edge_pattern, then the damping blocks: per entry in assemble's order
+        for i, j, sign in ((k, k, -1.0), (k, k + 1, 1.0), (k + 1, k, 1.0), (k + 1, k + 1, -1.0)):
+            row, col = 2 * i, 2 * j - 2 * i + KL
+            _scatter_row(J, row, col, T, _S, sign)
+            _scatter_row(J, row, col + 1, T, _S + 1, sign)
+            _scatter_row(J, row + 1, col - 1, T, _S + 1, sign)
+            _scatter_row(J, row + 1, col, T, _S + 2, sign)
+        for i, j, sign in ((k, k, -1.0), (k, k + 1, 1.0), (k + 1, k, 1.0), (k + 1, k + 1, -1.0)):
+            row, col = 2 * i, 2 * j - 2 * i + KL
+            for m in range(4):
+                _scatter_row(J, row + m // 2, col + m % 2 - m // 2, T, _TS + m, sign)
+    for j in range(1, n2 // 2 - 1):
+        for r in range(R):
+            kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = _turning(q, j, r)
+            kb = EI[r] / (0.5 * (lbar[j - 1, r] + lbar[j, r]))
+            dk = kap - kbar[j - 1, r]
+            w = 1.0 + 0.25 * kap * kap
+            phidot = _turning_rate(v, j, r, g0x, g0y, g1x, g1y, g2x, g2y)
+            dbr = db[r]
+            s2 = kb * (w * w + dk * 0.5 * kap * w) + dbr * w * w * kap * phidot
+            T[_ALPHA, r] = -(cx * s2 + cv * dbr * w * w)
+            T[_BETA, r] = -cx * (kb * dk * w + dbr * w * w * phidot)
+            T[_C, r] = -cx * dbr * w * w
+            T[_G, r], T[_G + 1, r], T[_G + 2, r], T[_G + 3, r] = g0x, g0y, g1x, g1y
+            T[_G + 4, r], T[_G + 5, r] = g2x, g2y
+            ia, ib = 1.0 / (la * la), 1.0 / (lbn * lbn)
+            ha00, ha01, ha11 = 2.0 * tax * tay * ia, (tay * tay - tax * tax) * ia, -2.0 * tax * tay * ia
+            hb00, hb01, hb11 = 2.0 * tbx * tby * ib, (tby * tby - tbx * tbx) * ib, -2.0 * tbx * tby * ib
+            T[_HA, r], T[_HA + 1, r], T[_HA + 2, r] = ha00, ha01, ha11
+            T[_HB, r], T[_HB + 1, r], T[_HB + 2, r] = hb00, hb01, hb11
+            T[_HD, r], T[_HD + 1, r], T[_HD + 2, r] = hb00 - ha00, hb01 - ha01, hb11 - ha11
+            ux, uy = v[2 * j, r] - v[2 * j - 2, r], v[2 * j + 1, r] - v[2 * j - 1, r]
+            wx, wy = v[2 * j + 2, r] - v[2 * j, r], v[2 * j + 3, r] - v[2 * j + 1, r]
+            r0x, r0y = ha00 * ux + ha01 * uy, ha01 * ux + ha11 * uy
+            r2x, r2y = hb00 * wx + hb01 * wy, hb01 * wx + hb11 * wy
+            T[_RV, r], T[_RV + 1, r], T[_RV + 4, r], T[_RV + 5, r] = r0x, r0y, r2x, r2y
+            T[_RV + 2, r], T[_RV + 3, r] = -r0x - r2x, -r0y - r2y
+        # the damping blocks (a, b) = c g_a r_b^T, nodes a, b in j-1 .. j+1
+        for ai in range(3):
+            for bi in range(3):
                 row, col = 2 * (j - 1 + ai), 2 * (bi - ai) + KL
-                ga, gb = _G + 2 * ai, _G + 2 * bi
-                _scatter_h(J, row, col, T, ga, gb, h, sign)
-                _scatter_h(J, row, col + 1, T, ga, gb + 1, h + 1, sign)
-                _scatter_h(J, row + 1, col - 1, T, ga + 1, gb, h + 1, sign)
-                _scatter_h(J, row + 1, col, T, ga + 1, gb + 1, h + 2, sign)
+                gx, gy, rx, ry = _G + 2 * ai, _G + 2 * ai + 1, _RV + 2 * bi, _RV + 2 * bi + 1
+                _scatter(J, row, col, T, _C, gx, rx, 1.0)
+                _scatter(J, row, col + 1, T, _C, gx, ry, 1.0)
+                _scatter(J, row + 1, col - 1, T, _C, gy, rx, 1.0)
+                _scatter(J, row + 1, col, T, _C, gy, ry, 1.0)
+        # the blocks alpha g_a g_b^T + beta (edge-angle Hessians), in assemble's order
+        for ai, bi, h, sign in (
+            (0, 0, _HA, -1.0),
+            (0, 1, _HA, 1.0),
+            (1, 0, _HA, 1.0),
+            (0, 2, _HA, 0.0),
+            (2, 0, _HA, 0.0),
+            (1, 1, _HD, 1.0),
+            (1, 2, _HB, -1.0),
+            (2, 1, _HB, -1.0),
+            (2, 2, _HB, 1.0),
+        ):
+            row, col = 2 * (j - 1 + ai), 2 * (bi - ai) + KL
+            ga, gb = _G + 2 * ai, _G + 2 * bi
+            _scatter_h(J, row, col, T, ga, gb, h, sign)
+            _scatter_h(J, row, col + 1, T, ga, gb + 1, h + 1, sign)
+            _scatter_h(J, row + 1, col - 1, T, ga + 1, gb, h + 1, sign)
+            _scatter_h(J, row + 1, col, T, ga + 1, gb + 1, h + 2, sign)
 
 
 @njit(cache=True, error_model="numpy")
@@ -458,9 +481,26 @@ def probe(robots: int, rounds: int) -> bool:
         "per robot (assemble)": lambda k: per_robot_jacobian(q, v, kbar, lbar, prm, F_ref, J_ref, cx, cv, k),
         "split": lambda k: split_jacobian(*cols, *params, F_split, J_soa, scratch, cx, cv, k),
     }
+    blocked = {}  # lanes -> (forces, band) over blocks of that many robots
+    for lanes in BLOCK_LANES:
+
+        def to_blocks(a, lanes=lanes):  # (robots, ...) -> (blocks, ..., lanes)
+            b = a.reshape((robots // lanes, lanes) + a.shape[1:])
+            return np.ascontiguousarray(np.moveaxis(b, 1, -1))
+
+        ins = [to_blocks(a) for a in (q, v, kbar, lbar)] + [to_blocks(p) for p in params]
+        FB, JB = np.zeros_like(ins[0]), to_blocks(np.zeros_like(J_ref))
+        TB = np.zeros((N_SCRATCH, lanes))
+        blocked[lanes] = (FB, JB)
+        runs[f"blocks of {lanes}"] = lambda k, ins=ins, FB=FB, JB=JB, TB=TB: blocked_jacobian(
+            *ins, FB, JB, TB, cx, cv, k
+        )
     for run in runs.values():
         run(1)
     jacobian = np.array_equal(F_ref, F_split.T) and np.array_equal(J_ref, J_soa.transpose(2, 0, 1))
+    for FB, JB in blocked.values():
+        jacobian &= np.array_equal(F_ref, np.moveaxis(FB, -1, 1).reshape(F_ref.shape))
+        jacobian &= np.array_equal(J_ref, np.moveaxis(JB, -1, 1).reshape(J_ref.shape))
     _print(f"{robots} eels, forces and Jacobian", jacobian, _timed(runs, robots, rounds, reps))
 
     # the backward-Euler Jacobian of each robot's state (water, h = 0.01 s), factored and solved
