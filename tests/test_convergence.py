@@ -33,7 +33,7 @@ EEL = [
     "open-loop",
     "pid",  # gains (10, 1, 5)
     "pid:Kd=2,Ki=1",  # gains (10, 2, 1)
-    "decentralized",  # circulant closure
+    "decentralized",  # circulant closure, 2 s on the clock first
     "decentralized:closure=pacemaker",
     "zoo:ppo",
     "random",
@@ -47,7 +47,8 @@ WORM = [
     "random",
 ]
 CASES = [("SoftEel-v0", s) for s in EEL] + [("SoftWorm-v0", s) for s in WORM]
-#: the circulant chain from rest on the thesis gait, where its phases need not lock in
+#: the circulant chain from the first step (no start-up), as the sources run it from rest on the gait
+BARE_CHAIN = "decentralized:startup=0"
 ON_GAIT = {"start_on_gait": {}}
 #: the cheaper second-order method, under the load that needs the most Newton iterations
 BDF2 = {"integrator": {"method": "bdf2"}}
@@ -55,17 +56,16 @@ BDF2 = {"integrator": {"method": "bdf2"}}
 #: (env, policy) -> what does not converge today (measured at factors 1, 4, 16, seed 0; the
 #: ratios are value / value at h/16, for h = 0.01 s, h/4, h/16).
 KNOWN_FAILING = {
-    ("SoftEel-v0", "decentralized"): "curvature error 0.0247, 0.0431, 0.0380 (35 %; speed and fluid "
-    "power within 3.9 %). The ring of neighbour-following nodes has a slow, lightly damped mode: "
-    "the errors of the neighbours' phase lags rotate around the ring with a period of about 10.5 s "
-    "(over 40 s, minima of the error at 8, 19, 29.5, 39 s at every step), and the 10 s episode "
-    "ends inside its first swing. The noisy start (phase slips in the first 2 s) sets the swing's "
-    "amplitude, and the step changes it: at h its peaks are 22-36 % lower than at h/16 over "
-    "40 s. The mean error converges only from h/8 (seed 0 at h/2 ... h/64: 0.0399, 0.0431, 0.0376, "
-    "0.0380, 0.0383, 0.0387); gains do not remove the mode (h, h/16 over 2-10 s: Kd=4 0.062, "
-    "0.068; Ki=0 0.0127, 0.0578, a locked non-wave pattern at h/16; Kp=5 0.085, 0.095). Seeds 1-5 "
-    "disagree as much, and seed 4 at h/4 stops swimming (0.00001 m/s). From rest on the gait the "
-    "mode is not excited and the same controller converges (the case below)",
+    ("SoftEel-v0", BARE_CHAIN): "curvature error 0.0247, 0.0431, 0.0380 (35 %; speed and fluid "
+    "power within 3.9 %). From the straight, still start there is no phase to estimate: each node's "
+    "atan2(phi, phi_dot / omega) reads the start's small vibrations, and the chain amplifies any "
+    "difference in them: the start's noise scaled by 1 + 1e-4 moves the error at h from 0.0247 to "
+    "0.0377, as much as the step does. The ring's slow mode (the errors of the neighbours' phase lags rotating around it, period about "
+    "10.5 s) carries that difference through the episode. Over seeds 0-23 the errors differ "
+    "between the steps by up to 3.7x, and 4 seeds never start a wave at any step (all nodes bent "
+    "one way, the integral cancelling the feed-forward; seed 4 too at h/4). The default start-up "
+    "on the clock (the case 'decentralized' above) converges on all 24 seeds within 2.1 %, and "
+    "so does this chain from rest on the gait (the case below)",
 }
 
 
@@ -80,7 +80,8 @@ def _case(env_id: str, spec: str, env_kwargs: dict | None = None, label: str = "
     ("env_id", "spec", "env_kwargs"),
     [_case(*c) for c in CASES]
     + [
-        _case("SoftEel-v0", "decentralized", ON_GAIT, "-on-gait"),
+        _case("SoftEel-v0", BARE_CHAIN),
+        _case("SoftEel-v0", BARE_CHAIN, ON_GAIT, "-on-gait"),
         _case("SoftEel-v0", "random", BDF2, "-bdf2"),
     ],
 )

@@ -135,7 +135,8 @@ class DecentralizedTeam(_TeamBaseline):
 
     Node j's reference phase comes from its head-ward neighbour's curvature and rate as node j
     observes them (``head_kappa``, ``head_kappa_dot``); the pacemaker closure's head-most node
-    runs the clock. Bitwise the baseline on ``SoftEel-v0`` when no message is lost.
+    runs the clock, and every node does during the start-up. Bitwise the baseline on
+    ``SoftEel-v0`` when no message is lost.
     """
 
     def __init__(self, base: DecentralizedPhasePID, team: SegmentsEnv) -> None:
@@ -169,7 +170,7 @@ class DecentralizedTeam(_TeamBaseline):
             psi = np.zeros_like(kappa) - base.delta
         if p.closure == "pacemaker":
             psi[:, -1] = base.clock_phase(t)[:, -1]
-        kappa_des, kappa_dot_des = base.desired(psi)
+        kappa_des, kappa_dot_des = base.desired(base.start_up(psi, t))
         u = pid_law(base.gait, base.layout.dt, kappa, kappa_dot, kappa_des, kappa_dot_des, state[:, 1:])
         state[:, 0] = t + base.layout.dt
         base.last_rates, base.last_error = u, np.abs(kappa_des - kappa)

@@ -542,7 +542,8 @@ def model_departures(grid: StudyGrid) -> dict[str, float]:
     env = make_eval_env("SoftWorm-v0", seed=0, env_kwargs=kwargs)
     sine = evaluate(make_policy("inching:wave=sine", env), env, episodes=1, transient=0.0)[0]["distance"]
     env.close()
-    spec = "decentralized:" + ",".join(f"{k}={getattr(PIDParams(), k)!r}" for k in ("Kp", "Kd", "Ki"))
+    gains = ",".join(f"{k}={getattr(PIDParams(), k)!r}" for k in ("Kp", "Kd", "Ki"))
+    spec = f"decentralized:{gains},startup=0"  # the chain from the first step, as the sources run it
     chain = {
         substeps: rollout(
             "SoftEel-v0",
