@@ -51,7 +51,14 @@ DEFAULT_POLICIES = {
     "SoftWorm-v0": ["zoo:ppo", "inching-pid", "inching"],
     "SoftEelGoal-v0": ["zoo:ppo", "los"],
     "SoftEelPath-v0": ["los", "pid"],  # no path-following agent is shipped yet (docs/navigation.md)
-    "SoftEelSegments-v0": ["zoo:ppo", "decentralized", "decentralized:closure=pacemaker", "pid"],
+    # the shipped shared policy, the chain it imitated (no start-up), both closures, the clock
+    "SoftEelSegments-v0": [
+        "zoo:ppo",
+        "decentralized:startup=0",
+        "decentralized",
+        "decentralized:closure=pacemaker",
+        "pid",
+    ],
 }
 
 
