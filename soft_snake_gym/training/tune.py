@@ -219,7 +219,11 @@ def ppo_trial(params: dict[str, Any], settings: TuneSettings) -> None:
     from ray import tune  # here, not above: Ray is optional and takes seconds to import
 
     cfg = settings.trial_config(params)
-    run_dir = Path(tune.get_context().get_trial_dir()) / "run"
+    # the trial's folder in the experiment folder itself (the CLI's --out, a local path that every
+    # node of the cluster shares), not Tune's staging copy, which reaches it only when the driver
+    # syncs (every few seconds, and at the end): its learning curve is read live, and its
+    # checkpoints are where a restored trial looks for them, whichever node runs it
+    run_dir = Path(tune.get_context().get_storage().trial_fs_path) / "run"
     resume = run_dir.is_dir() and latest_checkpoint(run_dir) is not None  # a restored experiment
 
     def report(row: dict[str, float]) -> None:
