@@ -95,6 +95,16 @@ def test_episode_metrics_do_not_depend_on_the_time_step(env_id, spec, env_kwargs
     assert result.ok, "\n" + format_convergence(result)
 
 
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
+@pytest.mark.parametrize("spec", ["decentralized", "decentralized:closure=pacemaker"])
+def test_the_decentralized_chains_converge_from_other_starts_too(spec, seed):
+    # seed 0 alone proved little: without the start-up on the clock, over seeds 0-23 the circulant
+    # chain failed on 20 (4 never swam) and the pacemaker chain on 9 (its errors 16 % apart)
+    result = convergence("SoftEel-v0", spec, factors=(1, 4, 16), seed=seed)
+    assert result.values["average_speed"][-1] > 0.12  # a wave, not a stall
+    assert result.ok, "\n" + format_convergence(result)
+
+
 def _result(values: dict[str, list[float]], medium: str = "water", failures=None) -> ConvergenceResult:
     n = len(next(iter(values.values())))
     return ConvergenceResult(
