@@ -14,8 +14,8 @@ start's small vibrations, and the chain amplifies any difference in them, the in
 step's included. Measured with ``startup=0`` over seeds 0-23 of ``SoftEel-v0`` at h, h/4 and
 h/16: the circulant chain never starts a wave from 4 of them (all nodes bent one way, the
 integral cancelling the feed-forward: under 0.001 m/s), and its curvature error differs between
-the steps by up to 3.7x from the others. With the start-up every seed swims (0.1247 m/s at
-every step) and every error agrees within 2.1 % (0.0096 to 0.0098); the pacemaker closure, whose
+the steps by up to 3.7x from the others. With the start-up every seed swims (0.1247 to 0.1248
+m/s at every step) and every error agrees within 2.1 % (0.0096 to 0.0098); the pacemaker closure, whose
 errors differed by up to 16 % without it, within 2.1 % too.
 
 Default gains are (Kp, Kd, Ki) = (10, 2, 1), the sources' second set, not (10, 1, 5): with
