@@ -236,3 +236,21 @@ def test_cli_prints_the_table_writes_json_and_exit_code_says_converged(capsys, t
     assert "s (backward_euler);" in out  # the preset's integrator, not the default's
     code = main(["convergence", "SoftWorm-v0", "--policy", "inching:wave=sine,duty=0.5"])
     assert code == 2 and "duty" in capsys.readouterr().err
+
+
+def test_cli_checks_several_seeds_and_names_those_that_do_not_converge(capsys, tmp_path):
+    # the bare circulant chain (no start-up) from its noisy start: seed 10 does not converge
+    # (curvature error 0.0441, 0.0354, 0.0139 at h, h/4, h/16), seed 11 does
+    path = tmp_path / "seeds.json"
+    args = ["convergence", "SoftEel-v0", "--policy", "decentralized:startup=0", "--seed", "10"]
+    code = main([*args, "--seeds", "2", "--json", str(path)])
+    out = capsys.readouterr().out
+    assert code == 1, out
+    assert "one episode (seed 10)" in out and "one episode (seed 11)" in out
+    assert "converged on 1 of 2 seeds; not on seed 10" in out
+    data = json.loads(path.read_text())
+    assert data["ok"] is False and data["seeds"] == [10, 11]
+    assert [r["seed"] for r in data["results"]] == [10, 11]
+    assert [r["ok"] for r in data["results"]] == [False, True]
+    assert main([*args, "--seeds", "0"]) == 2
+    assert "--seeds 0 must be at least 1" in capsys.readouterr().err

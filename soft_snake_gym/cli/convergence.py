@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from soft_snake_gym.cli.common import add_env_arguments, env_kwargs_from_args
+from soft_snake_gym.cli.common import CLIError, add_env_arguments, env_kwargs_from_args
 from soft_snake_gym.studies.convergence import DEFAULT_FACTORS, convergence, format_convergence
 
 NAME = "convergence"
@@ -42,23 +42,60 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="seed of the episode and of 'random'; the same at every factor (default 0)",
     )
     p.add_argument(
+        "--seeds",
+        type=int,
+        default=1,
+        metavar="K",
+        help="check K episodes, seeds SEED to SEED+K-1, each at every factor: one seed can pass "
+        "by luck (default 1)",
+    )
+    p.add_argument(
         "--transient",
         type=float,
         default=2.0,
         help="start-up time left out of speed and error [s] (default 2)",
     )
     add_env_arguments(p)
-    p.add_argument("--json", metavar="PATH", help="also write the table as JSON")
+    p.add_argument(
+        "--json",
+        metavar="PATH",
+        help="also write the table as JSON (with --seeds K > 1: every seed's, and the verdict)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the refinement, print the table, write the JSON asked for; 1 if not converged."""
+    """Run the refinement per seed, print each table, write the JSON asked for; 1 if not converged."""
+    if args.seeds < 1:
+        raise CLIError(f"--seeds {args.seeds} must be at least 1")
     env_kwargs = env_kwargs_from_args(args)
-    result = convergence(args.env_id, args.policy, env_kwargs, args.factors, args.seed, args.transient)
-    print(format_convergence(result))
+    seeds = range(args.seed, args.seed + args.seeds)
+    results = []
+    for seed in seeds:  # each table as soon as its seed is done
+        results.append(convergence(args.env_id, args.policy, env_kwargs, args.factors, seed, args.transient))
+        print(format_convergence(results[-1]), flush=True)
+    failed = [seed for seed, r in zip(seeds, results, strict=True) if not r.ok]
+    if len(results) > 1:
+        verdict = f"converged on {len(results) - len(failed)} of {len(results)} seeds"
+        print(
+            verdict
+            + (
+                f"; not on seed{'s' if len(failed) > 1 else ''} {', '.join(map(str, failed))}"
+                if failed
+                else ""
+            )
+        )
     if args.json:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(result.to_dict(), indent=2))
+        data = (
+            results[0].to_dict()
+            if len(results) == 1
+            else {
+                "ok": not failed,
+                "seeds": list(seeds),
+                "results": [r.to_dict() for r in results],
+            }
+        )
+        path.write_text(json.dumps(data, indent=2))
         print(f"wrote {path}")
-    return 0 if result.ok else 1
+    return 1 if failed else 0

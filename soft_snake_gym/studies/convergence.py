@@ -158,6 +158,7 @@ class ConvergenceResult:
         values: metric -> value at each factor (NaN where not defined).
         failures: the episode's failure reason per factor ("" if none).
         rtol: relative tolerance; atol: metric -> absolute tolerance.
+        seed: the episode's seed.
     """
 
     env_id: str
@@ -171,6 +172,7 @@ class ConvergenceResult:
     failures: list[str]
     rtol: float
     atol: dict[str, float] = field(default_factory=dict)
+    seed: int = 0
 
     def deviations(self, metric: str) -> list[float]:
         """``|value - finest|`` at each factor."""
@@ -211,6 +213,7 @@ class ConvergenceResult:
             "h": self.h,
             "failures": self.failures,
             "rtol": self.rtol,
+            "seed": self.seed,
             "ok": self.ok,
             "metrics": {
                 m: {
@@ -296,6 +299,7 @@ def convergence(
         failures=failures,
         rtol=RELATIVE_TOLERANCE[medium],
         atol={m: ABSOLUTE_TOLERANCE[m] for m in metrics},
+        seed=seed,
     )
 
 
@@ -311,7 +315,7 @@ def format_convergence(result: ConvergenceResult) -> str:
     width = max(len(labels[m][0]) for m in r.values)
     col = max(12, *(len(h) for h in head))
     lines = [
-        f"{r.env_id}  policy={r.policy}: one episode at integration steps "
+        f"{r.env_id}  policy={r.policy}: one episode (seed {r.seed}) at integration steps "
         f"{', '.join(f'{h:.3g}' for h in r.h)} s ({r.method}); tolerance {100 * r.rtol:g} % ({r.medium}) of the "
         "finest run, or the absolute one near zero",
         f"{'metric':<{width}}  {'unit':<4}  "
