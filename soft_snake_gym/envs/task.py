@@ -213,7 +213,11 @@ def task_offsets(N: int, n_act: int, n_obs: int, n_path: int) -> tuple[int, ...]
 
 @njit(cache=True, inline="always")
 def task_views(f, obs, N, n_act, n_path):
-    """One robot's :class:`TaskArrays` over its block ``f`` and its ``obs`` (compiled code)."""
+    """One robot's :class:`TaskArrays` over its block ``f`` and its ``obs`` (compiled code), borrowed.
+
+    As :func:`~soft_snake_gym.physics.layout.sim_views`: the views pay no reference counting.
+    """
+    f, obs = L.borrowed(f), L.borrowed(obs)
     o_rs, o_act, o_uk, o_ul, o_w, o_low, o_high, o_raw, o_path, end = task_offsets(N, n_act, obs.size, n_path)
     return TaskArrays(
         f[:o_rs],

@@ -24,6 +24,8 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from soft_snake_gym.physics.banded import WIDTH
 
@@ -177,9 +179,28 @@ def sim_offsets(N: int) -> tuple[int, int, int, int, int, int, int, int]:
     return n2, o_kbar, o_lbar, o_prm, o_buf, o_J, o_out, o_out + N_OUT
 
 
+@intrinsic
+def borrowed(typingctx, arr):
+    """``arr`` without its reference count: the same array, its meminfo and parent NULL.
+
+    Views of it are not counted either, so a kernel that builds views of a block it was given
+    pays no atomic increments and decrements for them. Only for views that do not outlive the
+    call that borrowed them (the caller's array keeps the memory alive).
+    """
+
+    def codegen(context, builder, sig, args):
+        out = context.make_array(sig.return_type)(context, builder, value=args[0])
+        out.meminfo = cgutils.get_null_value(out.meminfo.type)
+        out.parent = cgutils.get_null_value(out.parent.type)
+        return out._getvalue()
+
+    return arr(arr), codegen
+
+
 @njit(cache=True, inline="always")
 def sim_views(f, ibuf):
-    """One robot's :class:`SimArrays` over its block ``f`` and its ``ibuf`` (compiled code)."""
+    """One robot's :class:`SimArrays` over its block ``f`` and its ``ibuf`` (compiled code), :func:`borrowed`."""
+    f, ibuf = borrowed(f), borrowed(ibuf)
     n2 = ibuf.shape[1]
     o_v, o_kbar, o_lbar, o_prm, o_buf, o_J, o_out, end = sim_offsets(n2 // 2)
     return SimArrays(
@@ -193,6 +214,23 @@ def sim_views(f, ibuf):
         ibuf,
         f[o_out:end],
         f,
+    )
+
+
+@njit(cache=True, inline="always")
+def borrowed_arrays(s):
+    """:class:`SimArrays` of the arrays of ``s`` (a SimArrays or the plain tuple), each :func:`borrowed`."""
+    return SimArrays(
+        borrowed(s[0]),
+        borrowed(s[1]),
+        borrowed(s[2]),
+        borrowed(s[3]),
+        borrowed(s[4]),
+        borrowed(s[5]),
+        borrowed(s[6]),
+        borrowed(s[7]),
+        borrowed(s[8]),
+        borrowed(s[9]),
     )
 
 

@@ -105,7 +105,7 @@ from soft_snake_gym.physics.layout import (
     SELF_INTERSECTION,
     SLIDING,
     STUCK,
-    SimArrays,
+    borrowed_arrays,
 )
 
 #: SDIRK2's diagonal coefficient (Alexander 1977): two backward-Euler stages of ``GAMMA dt``,
@@ -530,7 +530,7 @@ def ledger_energies(s):
     start recorded at ``O_L0_*`` into ``out[O_LEDGER:]`` (``LEDGER_KEYS``); ``s`` is
     :class:`~soft_snake_gym.physics.layout.SimArrays` or the plain tuple of its arrays.
     """
-    s = SimArrays(*s)
+    s = borrowed_arrays(s)  # no reference counting inside (layout.borrowed)
     q, v, kbar, lbar, prm, buf, out = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.out
     m = buf[B_M]
     ke = 0.0
@@ -668,7 +668,7 @@ def simulate(s, u_k, u_l, n_steps):
     Returns:
         The status code (``OK`` = 0).
     """
-    s = SimArrays(*s)
+    s = borrowed_arrays(s)  # no reference counting inside (layout.borrowed)
     q, v, kbar, lbar, prm, buf, ibuf, out = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.ibuf, s.out
     h = prm[P_H]
     nsub = int(prm[P_SUBSTEPS])
