@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import ast
+import os
 import pickle
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -243,3 +247,23 @@ def test_newton_work_counts_the_jacobians_residuals_and_factorizations_of_each_s
     sim = Simulator(SimConfig(integrator=Integrator(method="symplectic_euler")))
     sim.reset(x=start)
     assert not _work(sim, inputs[:3]).any()
+
+
+def test_the_kernels_run_as_python_with_numba_disabled_and_agree_with_the_compiled_ones():
+    # NUMBA_DISABLE_JIT=1 is how the stepper's passes are traced (docs/performance.md); the
+    # kernels' borrowed views (layout.borrowed, an intrinsic in compiled code) are the arrays there
+    code = (
+        "import numpy as np, gymnasium as gym, soft_snake_gym\n"
+        "env = gym.make('SoftWorm-v0'); env.reset(seed=0)\n"
+        "a = np.linspace(-0.5, 0.5, env.action_space.shape[0]).astype(np.float32)\n"
+        "print(repr([env.step(a)[0].tolist() for _ in range(3)]))\n"
+    )
+    runs = {}
+    for jit in ("0", "1"):
+        env = {**os.environ, "NUMBA_DISABLE_JIT": jit}
+        done = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300
+        )
+        assert done.returncode == 0, done.stderr[-2000:]
+        runs[jit] = np.array(ast.literal_eval(done.stdout))
+    np.testing.assert_allclose(runs["1"], runs["0"], rtol=1e-12, atol=1e-12)

@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 from numba.core import cgutils
-from numba.extending import intrinsic
+from numba.extending import intrinsic, overload
 
 from soft_snake_gym.physics.banded import WIDTH
 
@@ -180,14 +180,20 @@ def sim_offsets(N: int) -> tuple[int, int, int, int, int, int, int, int]:
     return n2, o_kbar, o_lbar, o_prm, o_buf, o_J, o_out, o_out + N_OUT
 
 
-@intrinsic
-def borrowed(typingctx, arr):
+def borrowed(arr):
     """``arr`` without its reference count: the same array, its meminfo and parent NULL.
 
     Views of it are not counted either, so a kernel that builds views of a block it was given
     pays no atomic increments and decrements for them. Only for views that do not outlive the
-    call that borrowed them (the caller's array keeps the memory alive).
+    call that borrowed them (the caller's array keeps the memory alive). In Python (the
+    kernels run with ``NUMBA_DISABLE_JIT=1``) it is ``arr`` itself.
     """
+    return arr
+
+
+@intrinsic
+def _borrowed(typingctx, arr):
+    """Compiled :func:`borrowed`: a copy of the array's struct with a NULL meminfo and parent."""
 
     def codegen(context, builder, sig, args):
         out = context.make_array(sig.return_type)(context, builder, value=args[0])
@@ -196,6 +202,11 @@ def borrowed(typingctx, arr):
         return out._getvalue()
 
     return arr(arr), codegen
+
+
+@overload(borrowed)
+def _borrowed_overload(arr):
+    return lambda arr: _borrowed(arr)
 
 
 @njit(cache=True, inline="always")
