@@ -75,15 +75,10 @@ def run(args: argparse.Namespace) -> int:
         print(format_convergence(results[-1]), flush=True)
     failed = [seed for seed, r in zip(seeds, results, strict=True) if not r.ok]
     if len(results) > 1:
-        verdict = f"converged on {len(results) - len(failed)} of {len(results)} seeds"
-        print(
-            verdict
-            + (
-                f"; not on seed{'s' if len(failed) > 1 else ''} {', '.join(map(str, failed))}"
-                if failed
-                else ""
-            )
-        )
+        line = f"converged on {len(results) - len(failed)} of {len(results)} seeds"
+        if failed:
+            line += f"; not on seed{'s' * (len(failed) > 1)} {', '.join(map(str, failed))}"
+        print(line)
     if args.json:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -13,10 +13,11 @@ diagnostics in ``out`` (indices ``O_*``). :class:`SimArrays` names the arrays of
 The float arrays are views of one block per robot, ``f`` (:func:`sim_offsets`), so that a
 step's hot calls pass two arrays, ``f`` and ``ibuf``, and rebuild the views in compiled code
 (:func:`sim_views`, free there): numba's dispatcher unboxes every array argument, about 0.2 µs
-each. The views are :func:`borrowed`: numba keeps an atomic reference count on every view of an
-unboxed array, which was a quarter of a single env's compiled step. Other calls from Python pass ``tuple(arrays)`` and the kernel turns it back into
-``SimArrays`` on entry (``SimArrays(*s)``): numba's dispatcher types a plain tuple of arrays in
-C but a NamedTuple in Python, about 5 µs more per call.
+each. Other calls from Python pass ``tuple(arrays)`` and the kernel turns it back into
+``SimArrays`` on entry (:func:`borrowed_arrays`): numba's dispatcher types a plain tuple of
+arrays in C but a NamedTuple in Python, about 5 µs more per call. Both give the kernels
+:func:`borrowed` views: numba keeps an atomic reference count on every view of an unboxed
+array, which was a quarter of a single env's compiled step.
 """
 
 from __future__ import annotations
