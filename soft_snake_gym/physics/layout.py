@@ -212,7 +212,10 @@ def _borrowed_overload(arr):
 
 @njit(cache=True, inline="always")
 def sim_views(f, ibuf):
-    """One robot's :class:`SimArrays` over its block ``f`` and its ``ibuf`` (compiled code), :func:`borrowed`."""
+    """One robot's :class:`SimArrays` over its block ``f`` and its ``ibuf`` (compiled code).
+
+    The views are :func:`borrowed`: no reference counts inside the kernels.
+    """
     f, ibuf = borrowed(f), borrowed(ibuf)
     n2 = ibuf.shape[1]
     o_v, o_kbar, o_lbar, o_prm, o_buf, o_J, o_out, end = sim_offsets(n2 // 2)

@@ -97,7 +97,7 @@ class DecentralizedPhasePID(_SerpenoidPolicy):
     Params = DecentralizedParams
 
     def start_up(self, psi: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """The reference phases: the clock's for the envs still in their start-up (``t < startup``), else ``psi``."""
+        """The reference phases: ``psi``, or the clock's for envs still in their start-up (``t < startup``)."""
         starting = t < self.params.startup
         return np.where(starting[:, None], self.clock_phase(t), psi) if starting.any() else psi
 
