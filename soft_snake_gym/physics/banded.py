@@ -52,13 +52,24 @@ def _factor(J, piv, n, threshold):
             return False
         if p != k:
             reach = max(reach, p + KU)
+        pivot = J[k, KL]
+        if reach <= k + KU and k + KL < n and k + KU < n:
+            # no exchange reaches past this column's band: KL rows of KU entries each, loops
+            # of constant length that the compiler unrolls (the same operations in the same order)
+            for d in range(1, KL + 1):
+                f = J[k + d, KL - d] / pivot
+                J[k + d, KL - d] = f
+                if f != 0.0:
+                    for e in range(1, KU + 1):
+                        J[k + d, KL - d + e] -= f * J[k, KL + e]
+            continue
         jmax = min(n - 1, max(k + KU, reach))
         if p != k:
             for j in range(k, jmax + 1):
                 tmp = J[k, j - k + KL]
                 J[k, j - k + KL] = J[p, j - p + KL]
                 J[p, j - p + KL] = tmp
-        pivot = J[k, KL]
+            pivot = J[k, KL]
         for i in range(k + 1, imax):
             f = J[i, k - i + KL] / pivot
             J[i, k - i + KL] = f
@@ -98,13 +109,21 @@ def band_solve(J: np.ndarray, piv: np.ndarray, n: int, b: np.ndarray) -> None:
             b[p] = tmp
         bk = b[k]
         if bk != 0.0:
-            for i in range(k + 1, min(n, k + KL + 1)):
-                b[i] -= J[i, k - i + KL] * bk
+            if k + KL < n:  # constant-length loops where the band is whole (as in band_factor)
+                for d in range(1, KL + 1):
+                    b[k + d] -= J[k + d, KL - d] * bk
+            else:
+                for i in range(k + 1, n):
+                    b[i] -= J[i, k - i + KL] * bk
     for k in range(n - 1, -1, -1):
         s = b[k]
-        # row k of U reaches at most k + KL + KU, and without exchanges k + KU
-        for j in range(k + 1, min(n - 1, k + KL + KU, max(k + KU, reach)) + 1):
-            s -= J[k, j - k + KL] * b[j]
+        if reach <= k + KU and k + KU < n:
+            for e in range(1, KU + 1):
+                s -= J[k, KL + e] * b[k + e]
+        else:
+            # row k of U reaches at most k + KL + KU, and without exchanges k + KU
+            for j in range(k + 1, min(n - 1, k + KL + KU, max(k + KU, reach)) + 1):
+                s -= J[k, j - k + KL] * b[j]
         b[k] = s / J[k, KL]
 
 
