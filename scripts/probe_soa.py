@@ -51,10 +51,11 @@ BLOCK_LANES = (4, 8, 16)
 @njit(cache=True, error_model="numpy")
 def per_robot(q, v, kbar, lbar, prm, F, J, reps):
     """``assemble``'s internal forces, robot by robot; arrays (robots, ...)."""
+    geo = np.empty((2, q.shape[1]))  # assemble's edge geometry scratch
     for _ in range(reps):
         for r in range(q.shape[0]):
             F[r, :] = 0.0
-            forces.assemble(q[r], v[r], kbar[r], lbar[r], prm[r], F[r], J[r], 0.0, 0.0, False, False)
+            forces.assemble(q[r], v[r], kbar[r], lbar[r], prm[r], F[r], J[r], 0.0, 0.0, False, False, geo)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -166,11 +167,12 @@ def split(q, v, kbar, lbar, EA, EI, d, db, F, reps):
 @njit(cache=True, error_model="numpy")
 def per_robot_water(q, v, kbar, lbar, prm, F, J, power, reps):
     """``assemble``'s internal forces and the water's drag, robot by robot, and the drag power."""
+    geo = np.empty((2, q.shape[1]))
     for _ in range(reps):
         for r in range(q.shape[0]):
             F[r, :] = 0.0
             power[r] = forces.assemble(
-                q[r], v[r], kbar[r], lbar[r], prm[r], F[r], J[r], 0.0, 0.0, False, True
+                q[r], v[r], kbar[r], lbar[r], prm[r], F[r], J[r], 0.0, 0.0, False, True, geo
             )
 
 
@@ -223,11 +225,12 @@ N_SCRATCH = 31
 @njit(cache=True, error_model="numpy")
 def per_robot_jacobian(q, v, kbar, lbar, prm, F, J, cx, cv, reps):
     """``assemble``'s internal forces and their Jacobian ``cx dF/dq + cv dF/dv``, robot by robot."""
+    geo = np.empty((2, q.shape[1]))
     for _ in range(reps):
         for r in range(q.shape[0]):
             F[r, :] = 0.0
             J[r, :, :] = 0.0
-            forces.assemble(q[r], v[r], kbar[r], lbar[r], prm[r], F[r], J[r], cx, cv, True, False)
+            forces.assemble(q[r], v[r], kbar[r], lbar[r], prm[r], F[r], J[r], cx, cv, True, False, geo)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

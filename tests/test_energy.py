@@ -11,7 +11,7 @@ import pytest
 
 from soft_snake_gym import Fluid, Integrator, Rod, SimConfig, Simulator, body_from_curvature
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-from soft_snake_gym.physics import forces
+from soft_snake_gym.physics import forces, geometry
 from soft_snake_gym.physics.banded import WIDTH, band_to_dense
 
 NO_DRAG = {"C_f": 0.0, "C_D": 0.0}  # water that stores energy but dissipates none
@@ -153,12 +153,19 @@ def _random_water_state(N: int, seed: int = 5) -> Simulator:
     return sim
 
 
+def _geo(q):
+    """The edge geometry of ``q`` that ``fluid_momentum`` reads (``geometry.edge_geometry``)."""
+    geo = np.zeros((2, q.size))
+    geometry.edge_geometry(q, geo)
+    return geo
+
+
 def _momentum_and_gradient(sim, q, v):
     """``P_f = dT_f/dv`` and ``G = dT_f/dx`` from the kernel, (2N,) each."""
     n = q.size
     P, G, J = np.zeros(n), np.zeros(n), np.zeros((n, WIDTH))
-    forces.fluid_momentum(q, v, sim.arrays.prm, P, 1.0, 0.0, J, 0.0, False)
-    forces.fluid_momentum(q, v, sim.arrays.prm, G, 0.0, 1.0, J, 0.0, False)
+    forces.fluid_momentum(_geo(q), v, sim.arrays.prm, P, 1.0, 0.0, J, 0.0, False)
+    forces.fluid_momentum(_geo(q), v, sim.arrays.prm, G, 0.0, 1.0, J, 0.0, False)
     return P, G
 
 
@@ -192,7 +199,7 @@ def test_consistent_added_mass_forces_and_jacobian_match_finite_differences(N):
         return P1 - dt * G1
 
     J = np.zeros((q.size, WIDTH))
-    forces.fluid_momentum(q + dt * v, v, prm, np.zeros(q.size), 0.0, 0.0, J, dt, True)
+    forces.fluid_momentum(_geo(q + dt * v), v, prm, np.zeros(q.size), 0.0, 0.0, J, dt, True)
     analytic = band_to_dense(J, q.size)
     fd = _fd(r, v)
     assert np.abs(analytic - fd).max() < 1e-7 * np.abs(fd).max()

@@ -22,7 +22,15 @@ from soft_snake_gym.physics.banded import (
     band_solve,
 )
 from soft_snake_gym.physics.cache import drop_stale_cache
-from soft_snake_gym.physics.geometry import edge_frame, node_tangent, turning, turning_rate
+from soft_snake_gym.physics.geometry import (
+    edge_frame,
+    edge_frame_at,
+    edge_geometry,
+    node_tangent,
+    turning,
+    turning_at,
+    turning_rate,
+)
 from soft_snake_gym.physics.layout import (
     P_A,
     P_ANISO,
@@ -71,21 +79,22 @@ def elastic_energy(q, kbar, lbar, prm):
 
 
 @njit(cache=True, error_model="numpy")
-def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
+def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
     """Add internal (elastic, damping) and, if ``water``, drag forces into F (2N,) [N].
 
     If ``jac``, also add ``cx dF/dq + cv dF/dv`` into the band ``J`` (exact, damping's
     position dependence included: without it Newton needs a second iteration every step).
-    Returns the power lost to drag ``-sum F_D . v_edge`` [W].
+    Writes the edges' lengths and tangents of ``q`` into ``geo`` (:func:`~soft_snake_gym.physics.
+    geometry.edge_geometry`, (2, 2N)) and computes every force from them, so each edge's square
+    root and divisions are done once, not four times. Returns the power lost to drag
+    ``-sum F_D . v_edge`` [W].
     """
     N = q.size // 2
     EA, EI, d, db = prm[P_EA], prm[P_EI], prm[P_DSTRETCH], prm[P_DBEND]
+    edge_geometry(q, geo)
     # stretching (docs/model.md §3): force on x[k+1] is -EA (|e|/lbar - 1) t
     for k in range(N - 1):
-        ex = q[2 * k + 2] - q[2 * k]
-        ey = q[2 * k + 3] - q[2 * k + 1]
-        l = math.sqrt(ex * ex + ey * ey)
-        tx, ty = ex / l, ey / l
+        l, tx, ty = geo[0, k], geo[1, 2 * k], geo[1, 2 * k + 1]
         lb = lbar[k]
         strain = l / lb - 1.0
         f = -EA * strain
@@ -116,7 +125,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
                 add_block(J, k + 1, k + 1, -t00, -t01, -t10, -t11)
     # bending (docs/model.md §3): F = -(EI/lvor)(kappa - kbar)(1 + kappa^2/4) d phi/d x
     for j in range(1, N - 1):
-        kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = turning(q, j)
+        kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = turning_at(geo, j)
         kb = EI / (0.5 * (lbar[j - 1] + lbar[j]))
         dk = kap - kbar[j - 1]
         w = 1.0 + 0.25 * kap * kap
@@ -231,7 +240,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water):
     cn = prm[P_RHO] * prm[P_CD] * prm[P_A]
     power = 0.0
     for i in range(N - 1):
-        l, tx, ty, nx, ny, vx, vy, vt, vn = edge_frame(q, v, i)
+        l, tx, ty, nx, ny, vx, vy, vt, vn = edge_frame_at(geo, v, i)
         gt = vt + vt * abs(vt)
         gn = vn + vn * abs(vn)
         fx = -ct * l * gt * tx - cn * l * gn * nx
@@ -323,7 +332,7 @@ def solve_mass(q, prm, m, F, a, J, piv, water):
 
 
 @njit(cache=True, error_model="numpy")
-def fluid_momentum(q, v, prm, R, sp, sg, J, dt, jac):
+def fluid_momentum(geo, v, prm, R, sp, sg, J, dt, jac):
     """The water's kinetic energy ``T_f = sum_i 1/2 mu_n (v^i .
 
     n^i)^2`` (docs/model.md §4) and its derivatives: adds ``sp P_f + sg G`` to R (2N,), with the
@@ -331,16 +340,18 @@ def fluid_momentum(q, v, prm, R, sp, sg, J, dt, jac):
     ``G = dT_f/dx`` [N]. If ``jac``, adds the Jacobian of ``P_f - dt G`` with respect to the
     end-of-step velocity (``x = x0 + dt v``) to the band J: ``dP_f/dv + dt (dP_f/dx - dG/dv) - dt^2
     dG/dx`` (``M_A``, a skew gyroscopic part and a symmetric curvature part). Returns ``T_f`` [J].
+    The positions enter through their edge geometry ``geo``
+    (:func:`~soft_snake_gym.physics.geometry.edge_geometry`, or :func:`assemble` of the same ``q``).
 
     Per edge, with ``c = rho pi C_A a^2`` (``mu_n = c l``), ``e = x[i+1] - x[i]``:
     ``dT/de = c (vn^2/2 t - vn vt n)``, ``d(mu_n vn n)/de = c (-vt n n^T + vn (n t^T - t n^T))``,
     ``d2T/de2 = c/l (vt^2 - vn^2/2) n n^T``.
     """
-    N = q.size // 2
+    N = v.size // 2
     cm = added_mass_coefficient(prm)
     tf = 0.0
     for i in range(N - 1):
-        l, tx, ty, nx, ny, vx, vy, vt, vn = edge_frame(q, v, i)
+        l, tx, ty, nx, ny, vx, vy, vt, vn = edge_frame_at(geo, v, i)
         tf += 0.5 * cm * l * vn * vn
         pn = 0.5 * sp * cm * l * vn  # half the edge's momentum to each node
         gt = sg * cm * 0.5 * vn * vn

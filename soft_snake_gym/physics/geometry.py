@@ -27,8 +27,20 @@ def turning(q, j):
     by = q[2 * j + 3] - q[2 * j + 1]
     la = math.sqrt(ax * ax + ay * ay)
     lb = math.sqrt(bx * bx + by * by)
-    tax, tay = ax / la, ay / la
-    tbx, tby = bx / lb, by / lb
+    return _turning_of(la, ax / la, ay / la, lb, bx / lb, by / lb)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def turning_at(geo, j):
+    """:func:`turning` from the edge geometry ``geo`` of :func:`edge_geometry` (bit for bit the same)."""
+    return _turning_of(
+        geo[0, j - 1], geo[1, 2 * j - 2], geo[1, 2 * j - 1], geo[0, j], geo[1, 2 * j], geo[1, 2 * j + 1]
+    )
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _turning_of(la, tax, tay, lb, tbx, tby):
+    """:func:`turning`'s quantities from the lengths and unit tangents of the node's two edges."""
     cross = tax * tby - tay * tbx
     dot = tax * tbx + tay * tby
     kappa = 2.0 * cross / (1.0 + dot)
@@ -36,6 +48,23 @@ def turning(q, j):
     g0x, g0y = -tay / la, tax / la
     g2x, g2y = -tby / lb, tbx / lb
     return kappa, g0x, g0y, -g0x - g2x, -g0y - g2y, g2x, g2y, tax, tay, tbx, tby, la, lb
+
+
+@njit(cache=True, error_model="numpy")
+def edge_geometry(q, geo):
+    """Every edge's length and unit tangent, once for the kernels that need them many times.
+
+    Writes ``geo[0, k]`` = ``l_k`` [m] and ``geo[1, 2k:2k+2]`` = ``t_k`` for the N-1 edges of
+    ``q`` (``geo``: at least (2, 2N-2)). :func:`turning_at` and :func:`edge_frame_at` read them and
+    give bit for bit what :func:`turning` and :func:`edge_frame` compute from ``q``.
+    """
+    for k in range(q.size // 2 - 1):
+        ex = q[2 * k + 2] - q[2 * k]
+        ey = q[2 * k + 3] - q[2 * k + 1]
+        l = math.sqrt(ex * ex + ey * ey)
+        geo[0, k] = l
+        geo[1, 2 * k] = ex / l
+        geo[1, 2 * k + 1] = ey / l
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -65,7 +94,18 @@ def edge_frame(q, v, i):
     ex = q[2 * i + 2] - q[2 * i]
     ey = q[2 * i + 3] - q[2 * i + 1]
     l = math.sqrt(ex * ex + ey * ey)
-    tx, ty = ex / l, ey / l
+    return _frame_of(l, ex / l, ey / l, v, i)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def edge_frame_at(geo, v, i):
+    """:func:`edge_frame` from the edge geometry ``geo`` of :func:`edge_geometry` (bit for bit the same)."""
+    return _frame_of(geo[0, i], geo[1, 2 * i], geo[1, 2 * i + 1], v, i)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _frame_of(l, tx, ty, v, i):
+    """:func:`edge_frame`'s quantities from edge i's length and unit tangent."""
     nx, ny = -ty, tx
     vx = 0.5 * (v[2 * i] + v[2 * i + 2])
     vy = 0.5 * (v[2 * i + 1] + v[2 * i + 3])

@@ -65,7 +65,10 @@ B_LRATE = 12
 # state: the position at the start of the last step (BDF2's history; NaN, set by
 # Simulator.set_state, while there is none)
 B_QPREV = 13
-N_BUF = 14
+# scratch: the edges' lengths and unit tangents of the current iterate (geometry.edge_geometry),
+# two rows from here (``buf[B_GEO : B_GEO + 2]``), computed once for the force kernels that use them
+B_GEO = 14
+N_BUF = 16
 I_PIV, I_ORDER, I_FRICTION, I_SWITCHES = 0, 1, 2, 3
 N_IBUF = 4
 SLIDING, STUCK = 0, 1

@@ -453,7 +453,9 @@ class Simulator:
         """Elastic plus damping forces on the nodes, (N, 2) [N]."""
         F = np.zeros(2 * self.N)
         a = self.arrays
-        forces.assemble(a.q, a.v, a.kbar, a.lbar, a.prm, F, a.J, 0.0, 0.0, False, False)
+        forces.assemble(
+            a.q, a.v, a.kbar, a.lbar, a.prm, F, a.J, 0.0, 0.0, False, False, a.buf[L.B_GEO : L.B_GEO + 2]
+        )
         return F.reshape(self.N, 2)
 
     def force_jacobians(self, water: bool | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -470,7 +472,9 @@ class Simulator:
         for cx, cv in ((1.0, 0.0), (0.0, 1.0)):
             F[:] = 0.0
             J = np.zeros((n, WIDTH))
-            forces.assemble(a.q, a.v, a.kbar, a.lbar, a.prm, F, J, cx, cv, True, water)
+            forces.assemble(
+                a.q, a.v, a.kbar, a.lbar, a.prm, F, J, cx, cv, True, water, a.buf[L.B_GEO : L.B_GEO + 2]
+            )
             mats.append(band_to_dense(J, n))
         return F.copy(), mats[0], mats[1]
 

@@ -27,13 +27,14 @@ from soft_snake_gym.physics.forces import (
     munk_force,
     solve_mass,
 )
-from soft_snake_gym.physics.geometry import self_intersects
+from soft_snake_gym.physics.geometry import edge_geometry, self_intersects
 from soft_snake_gym.physics.layout import (
     ADDED_MASS_CONSISTENT,
     B_A,
     B_DV,
     B_F,
     B_FEXT,
+    B_GEO,
     B_KEYS,
     B_LRATE,
     B_M,
@@ -177,7 +178,8 @@ def _be_residual(s, dt, medium, jac):
     if jac:
         J[:, :] = 0.0
     water = medium == MEDIUM_WATER
-    p_fluid = assemble(q, v, kbar, lbar, prm, F, J, -dt * dt, -dt, jac, water)
+    geo = buf[B_GEO : B_GEO + 2]
+    p_fluid = assemble(q, v, kbar, lbar, prm, F, J, -dt * dt, -dt, jac, water, geo)
     for i in range(n):
         R[i] = m[i] * dv[i] - dt * F[i]
     if jac:
@@ -185,7 +187,7 @@ def _be_residual(s, dt, medium, jac):
             J[i, KL] += m[i]
     if water:
         if int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
-            fluid_momentum(q, v, prm, R, 1.0, -dt, J, dt, jac)
+            fluid_momentum(geo, v, prm, R, 1.0, -dt, J, dt, jac)  # geo: assemble's, of q
             p0 = buf[B_P0]
             for i in range(n):
                 R[i] -= p0[i]
@@ -343,7 +345,7 @@ def _be_start(s, medium, extrapolate):
             F, m, fext = buf[B_F], buf[B_M], buf[B_FEXT]
             for i in range(n):
                 F[i] = fext[i]
-            assemble(q, v, s.kbar, s.lbar, prm, F, J, 0.0, 0.0, False, False)
+            assemble(q, v, s.kbar, s.lbar, prm, F, J, 0.0, 0.0, False, False, buf[B_GEO : B_GEO + 2])
             for i in range(n // 2):
                 r0, r1 = 2 * i, 2 * i + 1
                 if state[i] == STUCK and math.hypot(F[r0], F[r1]) > prm[P_MUS] * m[r0] * prm[P_G]:
@@ -357,9 +359,10 @@ def _be_start(s, medium, extrapolate):
             v0[i] = v[i]
             v[i] += extrapolate * (v[i] - v_prev)
         if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
-            p0 = buf[B_P0]
+            p0, geo = buf[B_P0], buf[B_GEO : B_GEO + 2]
             p0[:] = 0.0
-            fluid_momentum(q0, v0, prm, p0, 1.0, 0.0, J, 0.0, False)
+            edge_geometry(q0, geo)
+            fluid_momentum(geo, v0, prm, p0, 1.0, 0.0, J, 0.0, False)
 
 
 @njit(cache=True, error_model="numpy")
@@ -377,9 +380,10 @@ def _sdirk2_second_start(s, medium):
     q0, v0, vstep = buf[B_Q0], buf[B_V0], buf[B_VSTEP]
     c = (1.0 - GAMMA) / GAMMA
     if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
-        p0, p1 = buf[B_P0], buf[B_A]
+        p0, p1, geo = buf[B_P0], buf[B_A], buf[B_GEO : B_GEO + 2]
         p1[:] = 0.0
-        fluid_momentum(q, v, prm, p1, 1.0, 0.0, J, 0.0, False)
+        edge_geometry(q, geo)
+        fluid_momentum(geo, v, prm, p1, 1.0, 0.0, J, 0.0, False)
         for i in range(n):
             p0[i] += c * (p1[i] - p0[i])
     for i in range(n):
@@ -497,7 +501,9 @@ def _symplectic_substep(s, dt, medium):
     F, a, m, fext = buf[B_F], buf[B_A], buf[B_M], buf[B_FEXT]
     for i in range(n):
         F[i] = fext[i]
-    p_fluid = assemble(q, v, kbar, lbar, prm, F, J, 0.0, 0.0, False, medium == MEDIUM_WATER)
+    p_fluid = assemble(
+        q, v, kbar, lbar, prm, F, J, 0.0, 0.0, False, medium == MEDIUM_WATER, buf[B_GEO : B_GEO + 2]
+    )
     if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
         munk_force(q, v, prm, F)
     solve_mass(q, prm, m, F, a, J, ibuf[I_PIV], medium == MEDIUM_WATER)
@@ -632,9 +638,10 @@ def _bdf2_substep(s, dt, medium):
     _be_start(s, medium, 1.0)
     q0, v0 = buf[B_Q0], buf[B_V0]
     if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
-        p0, p1 = buf[B_P0], buf[B_A]
+        p0, p1, geo = buf[B_P0], buf[B_A], buf[B_GEO : B_GEO + 2]
         p1[:] = 0.0
-        fluid_momentum(qprev, vprev, prm, p1, 1.0, 0.0, J, 0.0, False)
+        edge_geometry(qprev, geo)
+        fluid_momentum(geo, vprev, prm, p1, 1.0, 0.0, J, 0.0, False)
         for i in range(n):
             p0[i] += (p0[i] - p1[i]) / 3.0
     for i in range(n):
