@@ -103,8 +103,9 @@ def _loop_copy(k, J, Jw, b, bw):
 @njit(cache=True)
 def _loop_observe(k, q, v, kbar, w, low, high, raw, obs):
     s = 0.0
+    geo = np.empty((2, q.size))
     for _ in range(k):
-        s += observe.swim_observation(q, v, kbar, w, 0.0, low, high, raw, obs)
+        s += observe.swim_observation(q, v, kbar, w, 0.0, low, high, raw, obs, geo)
     return s
 
 

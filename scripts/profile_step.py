@@ -28,7 +28,7 @@ from numba import njit
 
 import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.envs import task as T
-from soft_snake_gym.physics import forces, layout, stepper
+from soft_snake_gym.physics import forces, geometry, layout, stepper
 
 
 @njit
@@ -43,8 +43,10 @@ def _loop_residual(k, sa, medium, jac):
 def _loop_check(k, q, v, kbar, lbar, uk, ul, prm, buf, ibuf):
     s = 0.0
     for _ in range(k):
+        geo = buf[layout.B_GEO : layout.B_GEO + 2]
+        geometry.edge_geometry(q, geo)
         s += stepper.check_state(q, v, lbar, prm, buf, ibuf) + forces.actuator_power(
-            q, kbar, lbar, uk, ul, prm
+            q, kbar, lbar, uk, ul, prm, geo
         )
     return s
 

@@ -11,7 +11,7 @@ import soft_snake_gym  # noqa: F401  registers the ids
 from soft_snake_gym.envs import SwimEnv
 from soft_snake_gym.multiagent import SegmentsEnv, eel_segments_v0
 from soft_snake_gym.multiagent.policies import CentralizedTeam, DecentralizedTeam
-from soft_snake_gym.physics import forces
+from soft_snake_gym.physics import forces, geometry
 from soft_snake_gym.policies import CurvaturePID, DecentralizedPhasePID
 
 
@@ -76,7 +76,9 @@ def test_local_powers_add_up_to_the_actuator_power_at_the_end_of_the_step():
         env.step(rng.uniform(-1, 1, 10).astype(np.float32))
     _, reward, _, _, info = env.step(rng.uniform(-1, 1, 10).astype(np.float32))
     s, t = env.sim.arrays, env.swim.task
-    total = forces.actuator_power(s.q, s.kbar, s.lbar, t.uk, np.zeros(11), s.prm)
+    geo = np.zeros((2, s.q.size))
+    geometry.edge_geometry(s.q, geo)
+    total = forces.actuator_power(s.q, s.kbar, s.lbar, t.uk, np.zeros(11), s.prm, geo)
     weight = env.swim.settings.energy_cost_weight
     local = info["agent_reward_energy"] / -weight  # |P_j|
     signed = -s.prm[forces.P_EI] / s.lbar[0] * (env.swim.task.raw[:10] - s.kbar) * t.uk

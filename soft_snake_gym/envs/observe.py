@@ -83,18 +83,18 @@ def _clip_into(raw, low, high, out):
 
 
 @njit(cache=True, error_model="numpy")
-def swim_observation(q, v, kbar, w, goal, low, high, raw, out):
+def swim_observation(q, v, kbar, w, goal, low, high, raw, out, geo):
     """The ``SoftEel-v0`` observation.
 
     Kappa (N-2), kappa_dot (N-2), kbar (N-2), com_velocity_body (2), goal_direction_body (2: cos,
     sin of ``goal`` minus the heading).
 
     Writes the unclipped values (float64) into ``raw`` and, clipped to ``[low, high]``, into
-    ``out`` (float32). Returns the heading [rad].
+    ``out`` (float32); ``geo`` (2, 2N) is scratch for the edge geometry. Returns the heading [rad].
     """
     n = kbar.size
-    geometry.curvatures(q, raw[:n])
-    geometry.curvature_rates(q, v, raw[n : 2 * n])
+    geometry.edge_geometry(q, geo)
+    geometry.curvatures_and_rates_at(geo, v, raw[:n], raw[n : 2 * n])
     for j in range(n):
         raw[2 * n + j] = kbar[j]
     heading, along, lateral = body_velocity(q, v, w)

@@ -288,7 +288,8 @@ def _observe(s, t):
     if int(t.tp[T_KIND]) == SWIM:
         if int(t.tp[T_TASK]) != TASK_DIRECTION:  # the distance to the target or the cross-track error
             t.raw[t.raw.size - 1] = t.rs[R_NAV]
-        return observe.swim_observation(s.q, s.v, s.kbar, t.w, t.tp[T_GOAL], t.low, t.high, t.raw, t.obs)
+        geo = s.buf[L.B_GEO : L.B_GEO + 2]
+        return observe.swim_observation(s.q, s.v, s.kbar, t.w, t.tp[T_GOAL], t.low, t.high, t.raw, t.obs, geo)
     ground = int(s.prm[L.P_MEDIUM]) == L.MEDIUM_GROUND
     return observe.inch_observation(
         s.q, s.v, s.lbar, s.ibuf[L.I_FRICTION], ground, t.w, t.low, t.high, t.raw, t.obs

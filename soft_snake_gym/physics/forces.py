@@ -430,10 +430,11 @@ def fluid_kinetic_energy(q, v, prm):
 
 
 @njit(cache=True, error_model="numpy")
-def damping_power(q, v, prm):
+def damping_power(q, v, prm, geo):
     """Power lost to material damping [W].
 
-    ``damping_bend sum kappa_dot^2 + damping_stretch sum ldot^2`` (docs/model.md §3).
+    ``damping_bend sum kappa_dot^2 + damping_stretch sum ldot^2`` (docs/model.md §3). ``geo`` is
+    the edge geometry of ``q`` (:func:`~soft_snake_gym.physics.geometry.edge_geometry`).
     """
     N = q.size // 2
     db, ds = prm[P_DBEND], prm[P_DSTRETCH]
@@ -448,21 +449,24 @@ def damping_power(q, v, prm):
             p += ds * ld * ld
     if db > 0.0:
         for j in range(1, N - 1):
-            k, g0x, g0y, g1x, g1y, g2x, g2y = turning(q, j)[:7]
+            k, g0x, g0y, g1x, g1y, g2x, g2y = turning_at(geo, j)[:7]
             kd = (1.0 + 0.25 * k * k) * turning_rate(g0x, g0y, g1x, g1y, g2x, g2y, v, j)
             p += db * kd * kd
     return p
 
 
 @njit(cache=True, error_model="numpy")
-def actuator_power(q, kbar, lbar, u_k, u_l, prm):
-    """Power the inputs put into the body, ``dE/dkbar . u_k + dE/dlbar . u_l`` (docs/model.md §3) [W]."""
+def actuator_power(q, kbar, lbar, u_k, u_l, prm, geo):
+    """Power the inputs put into the body, ``dE/dkbar . u_k + dE/dlbar . u_l`` (docs/model.md §3) [W].
+
+    ``geo`` is the edge geometry of ``q`` (:func:`~soft_snake_gym.physics.geometry.edge_geometry`).
+    """
     N = q.size // 2
     EA, EI = prm[P_EA], prm[P_EI]
     p = 0.0
     for j in range(1, N - 1):
         lv = 0.5 * (lbar[j - 1] + lbar[j])
-        dk = turning(q, j)[0] - kbar[j - 1]
+        dk = turning_at(geo, j)[0] - kbar[j - 1]
         p -= EI / lv * dk * u_k[j - 1]
         p -= 0.25 * EI * dk * dk / (lv * lv) * (u_l[j - 1] + u_l[j])
     for k in range(N - 1):

@@ -123,9 +123,22 @@ def curvatures(q, kappa):
 def curvature_rates(q, v, kdot):
     """Exact curvature rate ``(1 + kappa^2/4)(theta_dot^j - theta_dot^(j-1))``, (N-2,) [1/s]."""
     for j in range(1, q.size // 2 - 1):
-        k, g0x, g0y, g1x, g1y, g2x, g2y = turning(q, j)[:7]
-        phidot = turning_rate(g0x, g0y, g1x, g1y, g2x, g2y, v, j)
-        kdot[j - 1] = (1.0 + 0.25 * k * k) * phidot
+        kdot[j - 1] = _curvature_rate(turning(q, j), v, j)
+
+
+@njit(cache=True, error_model="numpy")
+def curvatures_and_rates_at(geo, v, kappa, kdot):
+    """:func:`curvatures` and :func:`curvature_rates` from the edge geometry ``geo`` of :func:`edge_geometry`."""
+    for j in range(1, v.size // 2 - 1):
+        turn = turning_at(geo, j)
+        kappa[j - 1] = turn[0]
+        kdot[j - 1] = _curvature_rate(turn, v, j)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _curvature_rate(turn, v, j):
+    k, g0x, g0y, g1x, g1y, g2x, g2y = turn[:7]
+    return (1.0 + 0.25 * k * k) * turning_rate(g0x, g0y, g1x, g1y, g2x, g2y, v, j)
 
 
 @njit(cache=True, error_model="numpy")

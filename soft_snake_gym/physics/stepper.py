@@ -597,7 +597,7 @@ def _sdirk2_substep(s, dt, medium, u_k, u_l, damped):
     friction energy, actuator work) [J].
     """
     q, v, kbar, lbar, prm, buf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf
-    lrate = buf[B_LRATE, : lbar.size]
+    lrate, geo = buf[B_LRATE, : lbar.size], buf[B_GEO : B_GEO + 2]
     e_fluid = e_damp = e_fric = e_act = 0.0
     status, iters, res = OK, 0, 0.0
     for stage in range(2):
@@ -615,9 +615,10 @@ def _sdirk2_substep(s, dt, medium, u_k, u_l, damped):
         w = (1.0 - GAMMA if stage == 0 else GAMMA) * dt
         e_fluid += w * p_fluid
         e_fric += w * p_fric
-        e_act += w * actuator_power(q, kbar, lbar, u_k, lrate, prm)
+        edge_geometry(q, geo)
+        e_act += w * actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
         if damped:
-            e_damp += w * damping_power(q, v, prm)
+            e_damp += w * damping_power(q, v, prm, geo)
         if status != OK:
             break
     return status, iters, res, e_fluid, e_damp, e_fric, e_act
@@ -687,6 +688,7 @@ def simulate(s, u_k, u_l, n_steps):
     damped = prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0
     tau = prm[P_LAG]
     lrate = buf[B_LRATE, : lbar.size]  # the length actuators' rates (docs/model.md §3)
+    geo = buf[B_GEO : B_GEO + 2]  # the edge geometry of q for the powers (geometry.edge_geometry)
     if tau == 0.0:
         lrate[:] = u_l  # no lag: the rates jump to the inputs (and _move_rest_shape keeps them there)
     status = OK
@@ -707,25 +709,27 @@ def simulate(s, u_k, u_l, n_steps):
                 # the inputs' work over the sub-step by the trapezoidal rule on P_act: exact for
                 # a body that lags the rest shape and for one that follows it at once, where a
                 # one-point rule charges inputs that reverse every step with work never done
-                p_act0 = actuator_power(q, kbar, lbar, u_k, lrate, prm)
+                edge_geometry(q, geo)
+                p_act0 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
                 status = _move_rest_shape(kbar, lbar, lrate, u_k, u_l, dt, tau)
                 if status != OK:
                     break
                 # each power where the step evaluates its forces: start (explicit) or end (implicit)
                 p_damp = 0.0
                 it, res = 0, 0.0
-                if symplectic:
-                    p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm)
+                if symplectic:  # the geometry of q is still geo's
+                    p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
                     if damped:
-                        p_damp = damping_power(q, v, prm)
+                        p_damp = damping_power(q, v, prm, geo)
                     p_fluid, p_fric = _symplectic_substep(s, dt, medium)
                 else:
                     status, it, res, p_fluid, p_fric = (
                         _bdf2_substep(s, dt, medium) if bdf2 else _be_substep(s, dt, medium, 1.0)
                     )
-                    p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm)
+                    edge_geometry(q, geo)
+                    p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
                     if damped:
-                        p_damp = damping_power(q, v, prm)
+                        p_damp = damping_power(q, v, prm, geo)
                 ef, ed, efr, ea = dt * p_fluid, dt * p_damp, dt * p_fric, 0.5 * dt * (p_act0 + p_act1)
             niter = max(niter, it)
             resid = max(resid, res)
