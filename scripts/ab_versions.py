@@ -1,0 +1,132 @@
+"""The package against an earlier commit of itself, in one process, in interleaved rounds.
+
+On a machine whose speed drifts by half from one minute to the next, two benchmark runs do not
+compare; two codes measured round by round in the same process do. This script checks out
+``--base`` (a commit) as a second package, ``ssg_base``, beside the installed one, and times both
+on the same cases, alternating: the single envs' ``step`` (unwrapped, random actions) and the
+vector env's whole ``step`` at 256 robots on one and two threads. It prints each case's median
+rate for both and the median and range of the per-round ratios.
+
+    python scripts/ab_versions.py --base 292cc90                  # ~3 min once the caches are warm
+    python scripts/ab_versions.py --base HEAD~1 --rounds 11 --seconds 2
+
+The copy lives in ``~/.cache/soft_snake_gym_ab/<commit>`` (its numba cache with it), so a second
+run against the same commit compiles nothing. Both packages register the same env ids; the script
+builds the env classes directly and never calls ``gym.make``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import io
+import subprocess
+import sys
+import tarfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+BASE_NAME = "ssg_base"
+
+
+def base_copy(rev: str) -> Path:
+    """The package at ``rev``, renamed ``ssg_base``, in a cache folder; returns the folder to put on the path."""
+    sha = subprocess.run(
+        ["git", "rev-parse", "--short=12", rev], cwd=ROOT, capture_output=True, text=True, check=True
+    ).stdout.strip()
+    home = Path.home() / ".cache" / "soft_snake_gym_ab" / sha
+    if (home / BASE_NAME / "__init__.py").exists():
+        return home
+    archive = subprocess.run(
+        ["git", "archive", sha, "soft_snake_gym"], cwd=ROOT, capture_output=True, check=True
+    )
+    home.mkdir(parents=True, exist_ok=True)
+    with tarfile.open(fileobj=io.BytesIO(archive.stdout)) as tar:
+        tar.extractall(home, filter="data")
+    (home / "soft_snake_gym").rename(home / BASE_NAME)
+    for f in (home / BASE_NAME).rglob("*"):
+        if f.suffix in (".py", ".yaml", ".yml"):
+            f.write_text(f.read_text().replace("soft_snake_gym", BASE_NAME))
+    return home
+
+
+def single(swim, inch, body: str, seconds: float, rng: np.random.Generator):
+    """A round of the single env of ``body``: steps per second over ``seconds``."""
+    env = (swim.SwimEnv if body == "eel" else inch.InchEnv)()
+    env.reset(seed=0)
+    acts = rng.uniform(-1, 1, (1000,) + env.action_space.shape)
+
+    def run() -> float:
+        n, start = 0, time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            for a in acts[(n % 1000) : (n % 1000) + 100]:
+                _, _, terminated, truncated, _ = env.step(a)
+                if terminated or truncated:
+                    env.reset()
+            n += 100
+        return n / (time.perf_counter() - start)
+
+    return run
+
+
+def batched(vector, body: str, threads: int, seconds: float, rng: np.random.Generator):
+    """A round of 256 robots of ``body`` in the vector env: robot-steps per second over ``seconds``."""
+    env = (vector.SwimVectorEnv if body == "eel" else vector.InchVectorEnv)(num_envs=256, num_threads=threads)
+    env.reset(seed=0)
+    acts = rng.uniform(-1, 1, (50, 256) + env.single_action_space.shape)
+
+    def run() -> float:
+        n, start = 0, time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            env.step(acts[n % 50])
+            n += 1
+        return n * 256 / (time.perf_counter() - start)
+
+    return run
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Time both codes on every case, interleaved, and print the table."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--base", required=True, help="the commit to compare against (any git revision)")
+    parser.add_argument("--rounds", type=int, default=7, help="interleaved rounds per case (default 7)")
+    parser.add_argument("--seconds", type=float, default=1.0, help="seconds per case and round (default 1)")
+    args = parser.parse_args(argv)
+    if args.rounds < 1 or not args.seconds > 0:
+        parser.error("--rounds must be at least 1 and --seconds positive")
+    sys.path.insert(0, str(base_copy(args.base)))
+    codes = {}
+    for name in ("soft_snake_gym", BASE_NAME):
+        codes[name] = [importlib.import_module(f"{name}.envs.{m}") for m in ("swim", "inch", "vector")]
+    rng = np.random.default_rng(0)
+    cases = {}
+    for body in ("eel", "worm"):
+        cases[f"{body}, single env"] = [single(s, i, body, args.seconds, rng) for s, i, _ in codes.values()]
+    for body in ("eel", "worm"):
+        for threads in (1, 2):
+            label = f"256 {body}s, {threads} thread{'s' if threads > 1 else ''}"
+            cases[label] = [batched(v, body, threads, args.seconds, rng) for _, _, v in codes.values()]
+    for now, base in cases.values():  # compile or load the caches outside the rounds
+        now()
+        base()
+    rates = {label: ([], []) for label in cases}
+    for r in range(args.rounds):
+        print(f"round {r + 1}/{args.rounds}", file=sys.stderr)
+        for label, (now, base) in cases.items():
+            rates[label][0].append(base())
+            rates[label][1].append(now())
+    print(f"now against {args.base}: steps/s (single envs) or robot-steps/s, medians of {args.rounds} rounds")
+    print(f"{'case':22s} {'base':>10s} {'now':>10s}  now/base: median (range)")
+    for label, (base, now) in rates.items():
+        ratio = np.array(now) / np.array(base)
+        print(
+            f"{label:22s} {np.median(base):10,.0f} {np.median(now):10,.0f}  "
+            f"{np.median(ratio):.2f} ({ratio.min():.2f}-{ratio.max():.2f})"
+        )
+
+
+if __name__ == "__main__":
+    main()
