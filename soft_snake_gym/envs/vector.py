@@ -38,7 +38,8 @@ from soft_snake_gym.envs.settings import resolve_settings
 from soft_snake_gym.envs.swim import SwimEnv
 from soft_snake_gym.envs.task import TaskArrays
 from soft_snake_gym.params import SimConfig, check_int
-from soft_snake_gym.physics import SimArrays, Simulator, allocate_arrays
+from soft_snake_gym.physics import SimArrays, Simulator, allocate_arrays, layout
+from soft_snake_gym.physics.cache import drop_stale_cache
 from soft_snake_gym.physics.layout import (
     LEDGER_KEYS,
     N_LEDGER,
@@ -69,6 +70,8 @@ ENV_CLASSES: dict[str, type[SoftRobotEnv]] = {
 
 ROBOTS_PER_THREAD = 64
 """Default threads: one per this many robots, at most ``NUMBA_NUM_THREADS``."""
+
+drop_stale_cache(__file__, [layout.__file__])  # the cached step passes embed layout's indices
 
 
 @njit(cache=True)
