@@ -126,3 +126,71 @@ def test_band_storage_round_trip():
     rng = np.random.default_rng(3)
     A = _random_band(rng, 12)
     assert np.array_equal(band_to_dense(_band_of(A), 12), A)
+
+
+def _reference_factor(J, piv, n, threshold):
+    """The threshold LU in plain Python with one general loop per column (no constant-length path)."""
+    reach = 0
+    for k in range(n):
+        diag = abs(J[k, KL])
+        p, best = k, diag
+        imax = min(n, k + KL + 1)
+        for i in range(k + 1, imax):
+            if abs(J[i, k - i + KL]) > best:
+                best, p = abs(J[i, k - i + KL]), i
+        if diag >= threshold * best:
+            p, best = k, diag
+        piv[k] = p
+        if p != k:
+            reach = max(reach, p + KU)
+        jmax = min(n - 1, max(k + KU, reach))
+        if p != k:
+            for j in range(k, jmax + 1):
+                J[k, j - k + KL], J[p, j - p + KL] = J[p, j - p + KL], J[k, j - k + KL]
+        for i in range(k + 1, imax):
+            f = J[i, k - i + KL] / J[k, KL]
+            J[i, k - i + KL] = f
+            if f != 0.0:
+                for j in range(k + 1, jmax + 1):
+                    J[i, j - i + KL] -= f * J[k, j - k + KL]
+
+
+def _reference_solve(J, piv, n, b):
+    reach = 0
+    for k in range(n):
+        if piv[k] != k:
+            reach = max(reach, piv[k] + KU)
+            b[k], b[piv[k]] = b[piv[k]], b[k]
+        if b[k] != 0.0:
+            for i in range(k + 1, min(n, k + KL + 1)):
+                b[i] -= J[i, k - i + KL] * b[k]
+    for k in range(n - 1, -1, -1):
+        s = b[k]
+        for j in range(k + 1, min(n - 1, k + KL + KU, max(k + KU, reach)) + 1):
+            s -= J[k, j - k + KL] * b[j]
+        b[k] = s / J[k, KL]
+
+
+@pytest.mark.parametrize("n", [4, 11, 20, 40])
+def test_the_constant_length_loops_are_bit_for_bit_the_general_ones(n):
+    # where no exchange reaches past a column, band_factor and band_solve run loops of constant
+    # length; they must do the general loops' operations in the same order, or every trajectory's
+    # digits would change. Half of these bands exchange rows (small diagonals), half do not.
+    rng = np.random.default_rng(n)
+    exchanged = 0
+    for trial in range(40):
+        A = _random_band(rng, n)
+        if trial % 2:
+            A += np.diag(np.full(n, 8.0))
+        J, J_ref = _band_of(A), _band_of(A)
+        piv, piv_ref = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+        assert band_factor(J, piv, n, PIVOT_THRESHOLD)
+        _reference_factor(J_ref, piv_ref, n, PIVOT_THRESHOLD)
+        assert np.array_equal(piv, piv_ref) and np.array_equal(J, J_ref)
+        exchanged += bool((piv != np.arange(n)).any())
+        b = rng.standard_normal(n)
+        x, x_ref = b.copy(), b.copy()
+        band_solve(J, piv, n, x)
+        _reference_solve(J_ref, piv_ref, n, x_ref)
+        assert np.array_equal(x, x_ref)
+    assert 0 < exchanged < 40  # both paths were taken

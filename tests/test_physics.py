@@ -6,10 +6,11 @@ import dataclasses
 
 import numpy as np
 import pytest
+from numba import njit
 
 from soft_snake_gym import Fluid, Integrator, Rod, SimConfig, Simulator, body_from_curvature
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-from soft_snake_gym.physics import forces, layout
+from soft_snake_gym.physics import forces, geometry, layout
 
 RNG_SEED = 1234
 
@@ -352,6 +353,41 @@ def test_steps_are_bitwise_deterministic():
         runs.append((sim.x, sim.v, sim.fluid_energy))
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
     assert runs[0][2] == runs[1][2]
+
+
+@pytest.mark.parametrize("N", [3, 10, 40])
+def test_the_shared_edge_geometry_gives_turning_and_edge_frames_bit_for_bit(N):
+    # the force kernels read every edge's length and tangent from one pass (edge_geometry); the
+    # results of the whole simulator stay those of computing them at every use only if each
+    # quantity is bitwise what turning and edge_frame give from the positions
+    sim = bent_simulator(N, medium="water")
+    q, v = sim.arrays.q, sim.arrays.v
+    geo = np.full((2, q.size), np.nan)
+    geometry.edge_geometry(q, geo)
+    for j in range(1, N - 1):
+        assert _turning_at(geo, j) == _turning(q, j)
+    for i in range(N - 1):
+        assert _edge_frame_at(geo, v, i) == _edge_frame(q, v, i)
+
+
+@njit
+def _turning(q, j):
+    return geometry.turning(q, j)
+
+
+@njit
+def _turning_at(geo, j):
+    return geometry.turning_at(geo, j)
+
+
+@njit
+def _edge_frame(q, v, i):
+    return geometry.edge_frame(q, v, i)
+
+
+@njit
+def _edge_frame_at(geo, v, i):
+    return geometry.edge_frame_at(geo, v, i)
 
 
 @pytest.mark.parametrize("N", [3, 200])
