@@ -15,10 +15,14 @@ package's own arithmetic:
 3. The forces with their Jacobian (``assemble(jac=True)``), the split carried on to the band:
    each node's quantities into scratch rows, then one loop per band entry; over the whole batch,
    and over blocks of 4, 8 and 16 robots (every array (blocks, ..., lanes), a block's band in L1).
-4. The Newton step's linear algebra: each robot's backward-Euler Jacobian (water, h = 0.01 s)
-   factored and solved by ``band_factor`` and ``band_solve``, robot by robot, and with the
-   robot index innermost without row exchanges (a robot that would need one is flagged, to be
-   redone robot by robot).
+4. Backward Euler's whole residual in water, with and without its Jacobian (``_be_residual``:
+   ``assemble``, the mass, the water's momentum), robot by robot and by the package's blocks
+   of 16 (``physics.lanes``: flat arrays with constant strides, straight-line code per lane),
+   the gathering of each block from the robots' arrays included.
+5. The Newton step's linear algebra: each robot's backward-Euler Jacobian (water, h = 0.01 s)
+   factored and solved by ``band_factor`` and ``band_solve``, robot by robot, with the robot
+   index innermost without row exchanges (a robot that would need one is flagged, to be
+   redone robot by robot), and by ``physics.lanes``' blocks of 16.
 
 Every variant must give bitwise the same forces, powers, Jacobians, factors and solutions
 (exit 1 otherwise). Printed: thread CPU time per robot, medians over interleaved rounds, and
@@ -41,9 +45,12 @@ import numpy as np
 from numba import njit
 
 import soft_snake_gym  # noqa: F401 - registers the ids
-from soft_snake_gym.physics import banded, forces, layout, stepper
+from soft_snake_gym.physics import banded, forces, lanes, layout, stepper
 from soft_snake_gym.physics.banded import KL, KU, PIVOT_THRESHOLD
+from soft_snake_gym.physics.layout import SimArrays
 
+LANES = lanes.LANES
+"""Robots per block of the package's own kernels (``physics.lanes``)."""
 BLOCK_LANES = (4, 8, 16)
 """Robots per block of :func:`blocked_jacobian` (AVX2 holds 4 doubles)."""
 
@@ -372,6 +379,68 @@ def _lanes_jacobian(q, v, kbar, lbar, EA, EI, d, db, J, T, cx, cv):
 
 
 @njit(cache=True, error_model="numpy")
+def per_robot_residual(s, dt, jac, res, reps):
+    """``stepper._be_residual`` in water robot by robot (stacked ``s``); (|R|^2, max |R|/m, power) into ``res``."""
+    s = SimArrays(*s)
+    for _ in range(reps):
+        for r in range(s.q.shape[0]):
+            out = stepper._be_residual(layout.sim_views(s.f[r], s.ibuf[r]), dt, layout.MEDIUM_WATER, jac)
+            res[0, r], res[1, r], res[2, r] = out[0], out[1], out[2]
+
+
+@njit(cache=True, error_model="numpy")
+def block_residuals(s, dt, jac, res, R, J, reps):
+    """The same by ``lanes.residual``, block by block, each gathered from the robots' arrays first.
+
+    Writes the results per robot into ``res`` (3, robots), ``R`` (robots, 2N), ``J`` (robots, 2N, width).
+    """
+    s = SimArrays(*s)
+    n2, lanes_ = s.q.shape[1], lanes.LANES
+    x = lanes.allocate(n2)
+    p = np.empty((lanes.N_LANE_PRM, lanes_))
+    out = np.empty((lanes.N_LANE_RES, lanes_))
+    for _ in range(reps):
+        for b in range(s.q.shape[0] // lanes_):
+            lanes.gather(s, b * lanes_, x, p)
+            lanes.residual(x, p, dt, jac, out)
+            for r in range(lanes_):
+                i = b * lanes_ + r
+                res[0, i], res[1, i], res[2, i] = out[0, r], out[1, r], out[2, r]
+    for b in range(s.q.shape[0] // lanes_):  # the last pass's R and J per robot, for the comparison
+        lanes.gather(s, b * lanes_, x, p)
+        lanes.residual(x, p, dt, jac, out)
+        for r in range(lanes_):
+            i = b * lanes_ + r
+            for k in range(n2):
+                R[i, k] = x[10][k * lanes_ + r]
+                for c in range(J.shape[2]):
+                    J[i, k, c] = x[12][(k * J.shape[2] + c) * lanes_ + r]
+
+
+@njit(cache=True, error_model="numpy")
+def block_solves(J0, b0, J, b, kept, reps):
+    """``lanes.factor`` and ``lanes.solve`` on copies of flat blocks ``J0``, ``b0`` (blocks, flat)."""
+    n = b0.shape[1] // lanes.LANES
+    for _ in range(reps):
+        J[:] = J0
+        b[:] = b0
+        for blk in range(J0.shape[0]):
+            lanes.factor(J[blk], kept[blk], n)
+            lanes.solve(J[blk], b[blk], n)
+
+
+def to_lane_blocks(a: np.ndarray) -> np.ndarray:
+    """(robots, ...) -> ``physics.lanes``' flat blocks (blocks, flat), element i of lane r at i LANES + r."""
+    b = a.reshape((a.shape[0] // lanes.LANES, lanes.LANES, -1))
+    return np.ascontiguousarray(b.transpose(0, 2, 1)).reshape(b.shape[0], -1)
+
+
+def from_lane_blocks(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """The inverse of :func:`to_lane_blocks`, to ``shape`` (robots, ...)."""
+    return a.reshape(a.shape[0], -1, lanes.LANES).transpose(0, 2, 1).reshape(shape)
+
+
+@njit(cache=True, error_model="numpy")
 def per_robot_solve(J0, b0, J, piv, b, reps):
     """``band_factor`` and ``band_solve`` robot by robot on copies of J0 (robots, n, width), b0."""
     n = J0.shape[1]
@@ -484,18 +553,18 @@ def probe(robots: int, rounds: int) -> bool:
         "per robot (assemble)": lambda k: per_robot_jacobian(q, v, kbar, lbar, prm, F_ref, J_ref, cx, cv, k),
         "split": lambda k: split_jacobian(*cols, *params, F_split, J_soa, scratch, cx, cv, k),
     }
-    blocked = {}  # lanes -> (forces, band) over blocks of that many robots
-    for lanes in BLOCK_LANES:
+    blocked = {}  # width -> (forces, band) over blocks of that many robots
+    for width in BLOCK_LANES:
 
-        def to_blocks(a, lanes=lanes):  # (robots, ...) -> (blocks, ..., lanes)
-            b = a.reshape((robots // lanes, lanes) + a.shape[1:])
+        def to_blocks(a, width=width):  # (robots, ...) -> (blocks, ..., width)
+            b = a.reshape((robots // width, width) + a.shape[1:])
             return np.ascontiguousarray(np.moveaxis(b, 1, -1))
 
         ins = [to_blocks(a) for a in (q, v, kbar, lbar)] + [to_blocks(p) for p in params]
         FB, JB = np.zeros_like(ins[0]), to_blocks(np.zeros_like(J_ref))
-        TB = np.zeros((N_SCRATCH, lanes))
-        blocked[lanes] = (FB, JB)
-        runs[f"blocks of {lanes}"] = lambda k, ins=ins, FB=FB, JB=JB, TB=TB: blocked_jacobian(
+        TB = np.zeros((N_SCRATCH, width))
+        blocked[width] = (FB, JB)
+        runs[f"blocks of {width}"] = lambda k, ins=ins, FB=FB, JB=JB, TB=TB: blocked_jacobian(
             *ins, FB, JB, TB, cx, cv, k
         )
     for run in runs.values():
@@ -505,6 +574,29 @@ def probe(robots: int, rounds: int) -> bool:
         jacobian &= np.array_equal(F_ref, np.moveaxis(FB, -1, 1).reshape(F_ref.shape))
         jacobian &= np.array_equal(J_ref, np.moveaxis(JB, -1, 1).reshape(J_ref.shape))
     _print(f"{robots} eels, forces and Jacobian", jacobian, _timed(runs, robots, rounds, reps))
+
+    # backward Euler's whole residual in water, without and with its Jacobian, at each robot's
+    # state (SDIRK2's stage of GAMMA h), robot by robot and by physics.lanes' blocks
+    dt, residual = stepper.GAMMA * 0.01, True
+    for jac in (False, True):
+        res_ref, res_blk = np.zeros((3, robots)), np.zeros((3, robots))
+        R_blk, J_blk = np.zeros(q.shape), np.zeros((robots, q.shape[1], J.shape[2]))
+        runs = {
+            "per robot (_be_residual)": lambda k, jac=jac, res=res_ref: per_robot_residual(
+                tuple(sim), dt, jac, res, k
+            ),
+            f"blocks of {LANES} (lanes)": lambda k, jac=jac, res=res_blk, R=R_blk, J=J_blk: block_residuals(
+                tuple(sim), dt, jac, res, R, J, k
+            ),
+        }
+        for run in runs.values():
+            run(1)
+        same = np.array_equal(res_ref, res_blk) and np.array_equal(sim.buf[:, layout.B_R], R_blk)
+        if jac:
+            same &= np.array_equal(sim.J, J_blk)
+        title = f"{robots} eels, backward Euler's residual in water" + (" and its Jacobian" if jac else "")
+        _print(title, same, _timed(runs, robots, rounds, reps))
+        residual &= same
 
     # the backward-Euler Jacobian of each robot's state (water, h = 0.01 s), factored and solved
     n = q.shape[1]
@@ -517,17 +609,22 @@ def probe(robots: int, rounds: int) -> bool:
     Jw, bw, piv = np.empty_like(J0), np.empty_like(b0), np.zeros((robots, n), dtype=np.int64)
     J0c, b0c = np.ascontiguousarray(J0.transpose(1, 2, 0)), np.ascontiguousarray(b0.T)
     Jc, bc, kept = np.empty_like(J0c), np.empty_like(b0c), np.ones(robots, dtype=np.bool_)
+    J0f, b0f = to_lane_blocks(J0), to_lane_blocks(b0)
+    Jf, bf, keptf = np.empty_like(J0f), np.empty_like(b0f), np.ones((robots // LANES, LANES), np.bool_)
     runs = {
         "per robot (band_factor)": lambda k: per_robot_solve(J0, b0, Jw, piv, bw, k),
         "robots innermost": lambda k: soa_solve(J0c, b0c, Jc, bc, kept, k),
+        f"blocks of {LANES} (lanes)": lambda k: block_solves(J0f, b0f, Jf, bf, keptf, k),
     }
     for run in runs.values():
         run(1)
     exchanged = int((piv != np.arange(n)).any(axis=1).sum())
     solved = bool(kept.all()) and np.array_equal(bw, bc.T) and np.array_equal(Jw, Jc.transpose(2, 0, 1))
+    solved &= bool(keptf.all()) and np.array_equal(bw, from_lane_blocks(bf, bw.shape))
+    solved &= np.array_equal(Jw, from_lane_blocks(Jf, Jw.shape))
     title = f"{robots} eels, factor + solve (2N = {n}; robots with a row exchange: {exchanged})"
     _print(title, solved, _timed(runs, robots, rounds, reps))
-    return same and water and jacobian and solved
+    return same and water and jacobian and residual and solved
 
 
 def main() -> int:

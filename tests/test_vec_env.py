@@ -75,7 +75,8 @@ def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_i
     and autoresets (with physics randomization drawn anew at each), in both autoreset modes; and
     under BDF2, whose history each reset starts anew.
     """
-    n, steps, kw = 4, 500 if mode == AutoresetMode.NEXT_STEP else 250, ENDS[env_id]
+    # a block of 16 robots stepped together (envs.task.block_step) and three one by one
+    n, steps, kw = 19, 500 if mode == AutoresetMode.NEXT_STEP else 250, ENDS[env_id]
     env_id = env_id.removesuffix("-bdf2")
     batched = gym.make_vec(env_id, num_envs=n, max_episode_steps=90, autoreset_mode=mode, **kw)
     sync = RecordEpisodeStatistics(
@@ -167,11 +168,11 @@ def test_autoreset_same_step_gives_final_obs_and_final_info():
 
 
 def test_threads_do_not_change_a_bit():
-    a = _actions(Box(-1, 1, (3, 8)), 150, seed=4)
+    a = _actions(Box(-1, 1, (35, 8)), 150, seed=4)  # two blocks of 16 robots and three more
     runs = []
     for threads in (1, 2):
         venv = SoftVectorEnv(
-            "SoftEel-v0", 3, num_threads=threads, max_episode_steps=40, max_curvature_rate=30.0
+            "SoftEel-v0", 35, num_threads=threads, max_episode_steps=40, max_curvature_rate=30.0
         )
         assert venv.num_threads == threads
         obs, _ = venv.reset(seed=3)

@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit, prange
 
 from soft_snake_gym.envs import observe
-from soft_snake_gym.physics import banded, forces, geometry, stepper
+from soft_snake_gym.physics import banded, forces, geometry, lanes, stepper
 from soft_snake_gym.physics import layout as L
 from soft_snake_gym.physics.cache import drop_stale_cache
 from soft_snake_gym.physics.layout import SimArrays
@@ -48,7 +48,7 @@ __all__ = [
 ]
 
 # the cached kernels embed the code of every kernel they call
-drop_stale_cache(__file__, [m.__file__ for m in (banded, forces, geometry, L, stepper, observe)])
+drop_stale_cache(__file__, [m.__file__ for m in (banded, forces, geometry, L, lanes, stepper, observe)])
 
 # --- task constants tp ------------------------------------------------------------------------
 SWIM, INCH = 0, 1
@@ -426,26 +426,55 @@ def robot_step(s, t):
     they keep their last valid values. The reward terms and the reward are written either way.
     """
     s, t = SimArrays(*s), TaskArrays(*t)
-    q, kbar, lbar, prm, out = s.q, s.kbar, s.lbar, s.prm, s.out
-    act, tp, rs, uk, ul, w = t.act, t.tp, t.rs, t.uk, t.ul, t.w
-    dt = tp[T_DT]
-    if int(tp[T_KIND]) == SWIM:
-        sq = observe.scale_rates(act, tp[T_SCALE], kbar, tp[T_LO], tp[T_HI], dt, uk)
-    else:
-        # with the actuators' lag tau the rest length coasts on: lbar + tau lbar_dot moves at exactly
-        # the commanded rate, so bounding it (not lbar) keeps lbar itself within the limits
-        lrate = s.buf[L.B_LRATE]
-        for k in range(lbar.size):
-            ul[k] = lbar[k] + prm[L.P_LAG] * lrate[k]
-        sq = observe.scale_rates(act, tp[T_SCALE], ul, tp[T_LO], tp[T_HI], dt, ul)
+    sq = step_begin(s, t)
     if sq != sq:
         return BAD_ACTION
+    before = energies_before(s)
+    status = stepper.simulate(s, t.uk, t.ul, int(t.tp[T_NSUB]))
+    step_end(s, t, status, sq, before)
+    return status
+
+
+@njit(cache=True, error_model="numpy")
+def step_begin(s, t):
+    """The start of :func:`robot_step`: the action clipped and scaled to the rates in ``t.uk``/``t.ul``.
+
+    Returns the squared norm of the clipped action, NaN if the action has a non-finite entry.
+    """
+    kbar, lbar, prm = s.kbar, s.lbar, s.prm
+    act, tp, uk, ul = t.act, t.tp, t.uk, t.ul
+    dt = tp[T_DT]
+    if int(tp[T_KIND]) == SWIM:
+        return observe.scale_rates(act, tp[T_SCALE], kbar, tp[T_LO], tp[T_HI], dt, uk)
+    # with the actuators' lag tau the rest length coasts on: lbar + tau lbar_dot moves at exactly
+    # the commanded rate, so bounding it (not lbar) keeps lbar itself within the limits
+    lrate = s.buf[L.B_LRATE]
+    for k in range(lbar.size):
+        ul[k] = lbar[k] + prm[L.P_LAG] * lrate[k]
+    return observe.scale_rates(act, tp[T_SCALE], ul, tp[T_LO], tp[T_HI], dt, ul)
+
+
+@njit(cache=True, error_model="numpy")
+def energies_before(s):
+    """The energy totals :func:`step_end` needs from before the physics: actuator, its work, the medium's."""
+    out = s.out
+    ground = int(s.prm[L.P_MEDIUM]) == L.MEDIUM_GROUND
+    return out[L.O_E_ACT], out[L.O_W_ACT], out[L.O_E_FRICTION] if ground else out[L.O_E_FLUID]
+
+
+@njit(cache=True, error_model="numpy")
+def step_end(s, t, status, sq, before):
+    """The end of :func:`robot_step`, after the physics ended with ``status``.
+
+    The centre of mass, powers, observation and metrics (on success), the reward terms and the
+    reward (always).
+    """
+    q, prm, out = s.q, s.prm, s.out
+    tp, rs, w = t.tp, t.rs, t.w
+    dt = tp[T_DT]
     ground = int(prm[L.P_MEDIUM]) == L.MEDIUM_GROUND
-    e_act0 = out[L.O_E_ACT]
-    w_act0 = out[L.O_W_ACT]
-    e_med0 = out[L.O_E_FRICTION] if ground else out[L.O_E_FLUID]
+    e_act0, w_act0, e_med0 = before
     nsub = int(tp[T_NSUB])
-    status = stepper.simulate(s, uk, ul, nsub)
     rs[R_STATUS] = status
     rs[R_ASQ] = sq
     task = int(tp[T_TASK])
@@ -495,7 +524,6 @@ def robot_step(s, t):
     rs[R_RXTE] = -tp[T_WXTE] * xte
     rs[R_RSUCC] = bonus
     rs[R_REWARD] = rs[R_RF] + rs[R_RE] + rs[R_RC] + rs[R_RFAIL] + rs[R_RXTE] + rs[R_RSUCC]
-    return status
 
 
 @njit(cache=True, error_model="numpy")
@@ -524,10 +552,14 @@ def batch_step(active, s, t, status):
     """:func:`robot_step` for every active robot, spread over numba's threads.
 
     For every robot ``i`` with ``active[i]``, of stacked simulator arrays ``s`` and task arrays
-    ``t`` (leading robot axis); robot ``i``'s status into ``status[i]``.
+    ``t`` (leading robot axis); robot ``i``'s status into ``status[i]``. The robots go in blocks
+    of ``lanes.LANES`` (:func:`block_step`), the rest one by one.
     """
     s, t = SimArrays(*s), TaskArrays(*t)
-    for i in prange(status.size):
+    blocks = status.size // lanes.LANES
+    for b in prange(blocks):
+        _step_block(active, s, t, status, b * lanes.LANES)
+    for i in prange(blocks * lanes.LANES, status.size):
         if active[i]:
             si, ti = _robot(s, t, i)
             status[i] = robot_step(si, ti)
@@ -537,7 +569,109 @@ def batch_step(active, s, t, status):
 def batch_step_serial(active, s, t, status):
     """:func:`batch_step` on the calling thread alone (no thread-pool launch: for one thread)."""
     s, t = SimArrays(*s), TaskArrays(*t)
-    for i in range(status.size):
+    blocks = status.size // lanes.LANES
+    for b in range(blocks):
+        _step_block(active, s, t, status, b * lanes.LANES)
+    for i in range(blocks * lanes.LANES, status.size):
         if active[i]:
             si, ti = _robot(s, t, i)
             status[i] = robot_step(si, ti)
+
+
+@njit(cache=True, error_model="numpy")
+def _step_block(active, s, t, status, first):
+    """Robots ``first`` .. ``first + LANES - 1``: by :func:`block_step` if it takes them all, else one by one."""
+    together = True
+    for r in range(lanes.LANES):
+        i = first + r
+        together &= active[i] and block_eligible(s.prm[i], t.tp[i]) and s.prm[i, L.P_H] == s.prm[first, L.P_H]
+    if together:
+        block_step(s, t, first, status)
+        return
+    for r in range(lanes.LANES):
+        i = first + r
+        if active[i]:
+            si, ti = _robot(s, t, i)
+            status[i] = robot_step(si, ti)
+
+
+@njit(cache=True, error_model="numpy")
+def block_eligible(prm, tp):
+    """True if :func:`block_step` takes the robot: one SDIRK2 step per control step, in water."""
+    return (
+        lanes.eligible(prm)
+        and int(prm[L.P_METHOD]) == L.METHOD_SDIRK2
+        and int(prm[L.P_SUBSTEPS]) == 1
+        and int(tp[T_NSUB]) == 1
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def block_step(s, t, first, status):
+    """:func:`robot_step` for the ``LANES`` robots from ``first``, each stage's Newton solve for all at once.
+
+    Every robot must be :func:`block_eligible`. It is :func:`robot_step` with
+    ``stepper.simulate``'s one SDIRK2 step written out around ``lanes.newton``: each robot's
+    task start, each stage's start and end, the step's end and the task's end are the same
+    functions, so every robot ends bit for bit as :func:`robot_step` leaves it.
+    """
+    n_lanes = lanes.LANES
+    x = lanes.allocate(s.q.shape[1])
+    p = np.empty((lanes.N_LANE_PRM, n_lanes))
+    result = np.empty((5, n_lanes))
+    sq = np.empty(n_lanes)
+    before = np.empty((3, n_lanes))
+    state = np.full(n_lanes, L.OK)  # each robot's status in the step
+    iters = np.zeros(n_lanes, dtype=np.int64)
+    acc = np.zeros((5, n_lanes))  # residual, fluid, damping and friction energy, actuator work
+    go = np.zeros(n_lanes, dtype=np.bool_)
+    for r in range(n_lanes):
+        si, ti = _robot(s, t, first + r)
+        sq[r] = step_begin(si, ti)
+        if sq[r] != sq[r]:
+            state[r] = BAD_ACTION
+            continue
+        before[0, r], before[1, r], before[2, r] = energies_before(si)
+        if si.prm[L.P_LAG] == 0.0:  # stepper.simulate's start of a step
+            si.buf[L.B_LRATE, : si.lbar.size] = ti.ul
+        si.out[L.O_NJAC] = si.out[L.O_NRES] = si.out[L.O_NFACTOR] = 0.0
+    dt = s.prm[first, L.P_H]  # stepper.simulate's h / nsub, one sub-step
+    for stage in range(2):
+        for r in range(n_lanes):
+            go[r] = False
+            if state[r] == L.OK:
+                si, ti = _robot(s, t, first + r)
+                state[r] = stepper.sdirk2_stage_start(si, stage, dt, L.MEDIUM_WATER, ti.uk, ti.ul)
+                go[r] = state[r] == L.OK
+        if not go.any():
+            break
+        lanes.newton(s, first, go, x, p, stepper.GAMMA * dt, result)
+        for r in range(n_lanes):
+            if go[r]:
+                si, ti = _robot(s, t, first + r)
+                damped = si.prm[L.P_DBEND] > 0.0 or si.prm[L.P_DSTRETCH] > 0.0
+                newton = (int(result[0, r]), int(result[1, r]), result[2, r], result[3, r], result[4, r])
+                sums = (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r])
+                state[r], (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r]) = (
+                    stepper.sdirk2_stage_end(si, stage, dt, ti.uk, damped, newton, sums)
+                )
+    for r in range(n_lanes):
+        i = first + r
+        if state[r] == BAD_ACTION:
+            status[i] = BAD_ACTION
+            continue
+        si, ti = _robot(s, t, i)
+        # stepper.simulate's end of its one step of one sub-step, from its zeroed sums
+        st = stepper.end_step(
+            si,
+            state[r],
+            max(0, iters[r]),
+            max(0.0, acc[0, r]),
+            0.0 + acc[1, r],
+            0.0 + acc[2, r],
+            0.0 + acc[3, r],
+            0.0 + acc[4, r],
+        )
+        stepper.ledger_energies(si)
+        step_end(si, ti, st, sq[r], (before[0, r], before[1, r], before[2, r]))
+        status[i] = st

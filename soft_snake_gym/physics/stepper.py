@@ -594,34 +594,61 @@ def _sdirk2_substep(s, dt, medium, u_k, u_l, damped):
     The rest shape moves to each stage's time before it is solved. The step's energies are its
     powers at the two stage ends weighted by the method's quadrature, ``1 - GAMMA`` and
     ``GAMMA``. Returns (status, iterations of both stages, residual, fluid, damping and
-    friction energy, actuator work) [J].
+    friction energy, actuator work) [J]. ``lanes.newton`` solves the stages of sixteen robots
+    at once between the same :func:`sdirk2_stage_start` and :func:`sdirk2_stage_end`.
     """
-    q, v, kbar, lbar, prm, buf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf
-    lrate, geo = buf[B_LRATE, : lbar.size], buf[B_GEO : B_GEO + 2]
-    e_fluid = e_damp = e_fric = e_act = 0.0
-    status, iters, res = OK, 0, 0.0
+    acc = (0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    status = OK
     for stage in range(2):
-        stage_dt = (GAMMA if stage == 0 else 1.0 - GAMMA) * dt
-        status = _move_rest_shape(kbar, lbar, lrate, u_k, u_l, stage_dt, prm[P_LAG])
+        status = sdirk2_stage_start(s, stage, dt, medium, u_k, u_l)
         if status != OK:
             break
+        status, acc = sdirk2_stage_end(s, stage, dt, u_k, damped, _be_newton(s, GAMMA * dt, medium), acc)
+        if status != OK:
+            break
+    iters, res, e_fluid, e_damp, e_fric, e_act = acc
+    return status, iters, res, e_fluid, e_damp, e_fric, e_act
+
+
+@njit(cache=True, error_model="numpy")
+def sdirk2_stage_start(s, stage, dt, medium, u_k, u_l):
+    """Move the rest shape to SDIRK2 stage ``stage``'s time and set up its backward-Euler solve.
+
+    Stage 0 starts from the step's start (:func:`_be_start`), stage 1 from the first stage's end
+    (:func:`_sdirk2_second_start`). Returns ``OK``, or ``BAD_REST_LENGTH`` (nothing set up).
+    """
+    lrate = s.buf[B_LRATE, : s.lbar.size]
+    stage_dt = (GAMMA if stage == 0 else 1.0 - GAMMA) * dt
+    status = _move_rest_shape(s.kbar, s.lbar, lrate, u_k, u_l, stage_dt, s.prm[P_LAG])
+    if status == OK:
         if stage == 0:
-            status, it, res, p_fluid, p_fric = _be_substep(s, GAMMA * dt, medium, GAMMA)
+            _be_start(s, medium, GAMMA)
         else:
             _sdirk2_second_start(s, medium)
-            status, it, res, p_fluid, p_fric = _be_newton(s, GAMMA * dt, medium)
-            buf[B_V0, :] = buf[B_VSTEP]  # the step's start, for the next step's first guess
-        iters += it
-        w = (1.0 - GAMMA if stage == 0 else GAMMA) * dt
-        e_fluid += w * p_fluid
-        e_fric += w * p_fric
-        edge_geometry(q, geo)
-        e_act += w * actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
-        if damped:
-            e_damp += w * damping_power(q, v, prm, geo)
-        if status != OK:
-            break
-    return status, iters, res, e_fluid, e_damp, e_fric, e_act
+    return status
+
+
+@njit(cache=True, error_model="numpy")
+def sdirk2_stage_end(s, stage, dt, u_k, damped, newton, acc):
+    """Account SDIRK2 stage ``stage`` solved with ``newton`` (:func:`_be_newton`'s result).
+
+    ``acc`` = (iterations, residual, fluid, damping and friction energy, actuator work) so far;
+    returns (status, the new ``acc``), the stage's powers weighted by its quadrature weight.
+    """
+    q, v, kbar, prm, buf = s.q, s.v, s.kbar, s.prm, s.buf
+    lrate, geo = buf[B_LRATE, : s.lbar.size], buf[B_GEO : B_GEO + 2]
+    status, it, res, p_fluid, p_fric = newton
+    iters, _, e_fluid, e_damp, e_fric, e_act = acc
+    if stage == 1:
+        buf[B_V0, :] = buf[B_VSTEP]  # the step's start, for the next step's first guess
+    w = (1.0 - GAMMA if stage == 0 else GAMMA) * dt
+    e_fluid += w * p_fluid
+    e_fric += w * p_fric
+    edge_geometry(q, geo)
+    e_act += w * actuator_power(q, kbar, s.lbar, u_k, lrate, prm, geo)
+    if damped:
+        e_damp += w * damping_power(q, v, prm, geo)
+    return status, (iters + it, res, e_fluid, e_damp, e_fric, e_act)
 
 
 @njit(cache=True, error_model="numpy")
@@ -677,7 +704,7 @@ def simulate(s, u_k, u_l, n_steps):
         The status code (``OK`` = 0).
     """
     s = borrowed_arrays(s)  # no reference counting inside (layout.borrowed)
-    q, v, kbar, lbar, prm, buf, ibuf, out = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.ibuf, s.out
+    q, v, kbar, lbar, prm, buf, out = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.out
     h = prm[P_H]
     nsub = int(prm[P_SUBSTEPS])
     dt = h / nsub
@@ -739,24 +766,36 @@ def simulate(s, u_k, u_l, n_steps):
             e_act += ea
             if status != OK:
                 break
-        if status == OK or status == NOT_CONVERGED:
-            check = check_state(q, v, lbar, prm, buf, ibuf)
-            if check != OK:
-                status = check
-        out[O_STATUS] = status
-        out[O_NITER] = niter
-        out[O_RESIDUAL] = resid
-        out[O_P_FLUID] = e_fluid / h
-        out[O_P_FRICTION] = e_fric / h
-        out[O_P_ACT] = e_act / h
-        out[O_E_FLUID] += e_fluid
-        out[O_E_FRICTION] += e_fric
-        out[O_E_ACT] += abs(e_act)
-        out[O_W_ACT] += e_act
-        out[O_P_DAMP] = e_damp / h
-        out[O_E_DAMP] += e_damp
-        out[O_NSTEPS] += 1
+        status = end_step(s, status, niter, resid, e_fluid, e_damp, e_fric, e_act)
         if status != OK:
             break
     ledger_energies(s)
+    return status
+
+
+@njit(cache=True, error_model="numpy")
+def end_step(s, status, niter, resid, e_fluid, e_damp, e_fric, e_act):
+    """Close a step of ``h``: check the state (unless it failed already) and record the step in ``out``.
+
+    Takes the step's status, Newton iterations, residual and energies [J]; returns the status.
+    """
+    q, v, lbar, prm, buf, ibuf, out = s.q, s.v, s.lbar, s.prm, s.buf, s.ibuf, s.out
+    h = prm[P_H]
+    if status == OK or status == NOT_CONVERGED:
+        check = check_state(q, v, lbar, prm, buf, ibuf)
+        if check != OK:
+            status = check
+    out[O_STATUS] = status
+    out[O_NITER] = niter
+    out[O_RESIDUAL] = resid
+    out[O_P_FLUID] = e_fluid / h
+    out[O_P_FRICTION] = e_fric / h
+    out[O_P_ACT] = e_act / h
+    out[O_E_FLUID] += e_fluid
+    out[O_E_FRICTION] += e_fric
+    out[O_E_ACT] += abs(e_act)
+    out[O_W_ACT] += e_act
+    out[O_P_DAMP] = e_damp / h
+    out[O_E_DAMP] += e_damp
+    out[O_NSTEPS] += 1
     return status

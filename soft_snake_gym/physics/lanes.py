@@ -1,0 +1,584 @@
+"""Sixteen robots per instruction: SDIRK2's backward-Euler stages in water, solved for a block at once.
+
+The batched env (``envs.task.batch_step``) steps its robots in blocks of :data:`LANES`. In a
+block every robot runs the same arithmetic on its own numbers, so the Newton solve of a stage
+(:func:`stepper._be_newton`) is done for the whole block with each robot in one lane of the
+CPU's vector registers: the residual with its Jacobian, the banded factorization and the
+solves. LLVM vectorizes a loop over the lanes only in one form, found with
+``scripts/probe_soa.py`` (docs/performance.md, "Sixteen lanes"):
+
+- every array of the block is flat, element ``i`` of lane ``r`` at ``i * LANES + r`` (a band
+  entry (row, col) at ``(row * WIDTH + col) * LANES + r``), strides that are compile-time
+  constants, so that LLVM can tell the stores of one lane's straight-line code apart;
+- a lane loop runs ``LANES`` = 16 iterations, the least that LLVM's loop vectorizer takes on
+  (on AVX-512 two registers of eight doubles);
+- indices are unsigned (no negative-index test per access), and a flag that chooses between
+  paths (``jac``) is a constant in each compiled body, or the loop runs both paths masked.
+
+**Bit for bit the scalar step.** The kernels do the scalar kernels' operations in the same
+order, so each lane's numbers are the ones :func:`stepper._be_residual`, ``band_factor`` and
+``band_solve`` give. The Newton control follows one path for every lane, the one nearly every
+stage takes in water: one Newton step (Jacobian, factorization, solve, a full step accepted)
+and, unless that converged, one chord step with the same factors; or none if the first guess
+converged. Each lane checks that :func:`stepper._be_newton` would have decided the same at
+each point. A lane where it would not (a line search, a renewed Jacobian, a row exchange, a
+third iteration, no convergence) is solved again from the stage's start by ``_be_newton``
+itself. A block's robots therefore end every stage exactly as the single env's, which the
+tests compare bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from soft_snake_gym.physics import banded, forces, layout, stepper
+from soft_snake_gym.physics.banded import KL, KU, PIVOT_THRESHOLD, WIDTH
+from soft_snake_gym.physics.cache import drop_stale_cache
+from soft_snake_gym.physics.layout import (
+    ADDED_MASS_CONSISTENT,
+    B_A,
+    B_F,
+    B_FEXT,
+    B_M,
+    B_P0,
+    B_Q0,
+    B_R,
+    B_V0,
+    MEDIUM_WATER,
+    O_NFACTOR,
+    O_NJAC,
+    O_NRES,
+    OK,
+    P_A,
+    P_ADDED_MASS,
+    P_B,
+    P_CD,
+    P_CF,
+    P_CHORD,
+    P_DBEND,
+    P_DSTRETCH,
+    P_EA,
+    P_EI,
+    P_MAXIT,
+    P_MEDIUM,
+    P_RHO,
+    P_TOL,
+)
+
+drop_stale_cache(__file__, [banded.__file__, forces.__file__, layout.__file__, stepper.__file__])
+
+LANES = 16
+"""Robots per block: a compile-time constant, and LLVM's least trip count for a vector loop."""
+
+# per-lane parameters, rows of the block's (N_LANE_PRM, LANES) array
+L_EA, L_EI, L_D, L_DB, L_CT, L_CN, L_CM, L_TOL, L_MAXIT, L_CHORD = range(10)
+N_LANE_PRM = 10
+# per-lane results of a residual, rows of (N_LANE_RES, LANES): |R|^2, max |R|/m, drag power
+L_NORM2, L_RMAX, L_PFLUID = range(3)
+N_LANE_RES = 3
+
+
+@njit(cache=True, inline="always")
+def _ix(i, r):
+    """Flat index of element ``i`` of lane ``r``."""
+    return np.uint64(i * LANES + r)
+
+
+@njit(cache=True, inline="always")
+def _jx(row, col, r):
+    """Flat index of band entry (``row``, ``col``) of lane ``r``."""
+    return np.uint64((row * WIDTH + col) * LANES + r)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _add_block(J, r, i, j, m00, m01, m10, m11):
+    """``banded.add_block`` for lane ``r`` of a flat band."""
+    row, col = 2 * i, 2 * j - 2 * i + KL
+    J[_jx(row, col, r)] += m00
+    J[_jx(row, col + 1, r)] += m01
+    J[_jx(row + 1, col - 1, r)] += m10
+    J[_jx(row + 1, col, r)] += m11
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _damping_blocks(J, r, a, j, cgx, cgy, r0x, r0y, r1x, r1y, r2x, r2y):
+    """Node j's bending-damping blocks ``c g_a r_b^T`` in node a's rows (``assemble``'s loop body).
+
+    Straight-line: a loop over a tuple of nodes, as in ``assemble``, keeps the lane loop scalar.
+    """
+    _add_block(J, r, a, j - 1, cgx * r0x, cgx * r0y, cgy * r0x, cgy * r0y)
+    _add_block(J, r, a, j, cgx * r1x, cgx * r1y, cgy * r1x, cgy * r1y)
+    _add_block(J, r, a, j + 1, cgx * r2x, cgx * r2y, cgy * r2x, cgy * r2y)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _bending_blocks(J, r, j, al, be, g0x, g0y, g1x, g1y, g2x, g2y, ha00, ha01, ha11, hb00, hb01, hb11):
+    """Node j's blocks ``alpha g_a g_b^T + beta (edge-angle Hessians)``, in ``assemble``'s order."""
+    m, b = j - 1, j + 1
+    _add_block(J, r, m, m, al * g0x * g0x - be * ha00, al * g0x * g0y - be * ha01, al * g0y * g0x - be * ha01,
+               al * g0y * g0y - be * ha11)  # fmt: skip
+    _add_block(J, r, m, j, al * g0x * g1x + be * ha00, al * g0x * g1y + be * ha01, al * g0y * g1x + be * ha01,
+               al * g0y * g1y + be * ha11)  # fmt: skip
+    _add_block(J, r, j, m, al * g1x * g0x + be * ha00, al * g1x * g0y + be * ha01, al * g1y * g0x + be * ha01,
+               al * g1y * g0y + be * ha11)  # fmt: skip
+    _add_block(J, r, m, b, al * g0x * g2x, al * g0x * g2y, al * g0y * g2x, al * g0y * g2y)
+    _add_block(J, r, b, m, al * g2x * g0x, al * g2x * g0y, al * g2y * g0x, al * g2y * g0y)
+    _add_block(J, r, j, j, al * g1x * g1x + be * (hb00 - ha00), al * g1x * g1y + be * (hb01 - ha01),
+               al * g1y * g1x + be * (hb01 - ha01), al * g1y * g1y + be * (hb11 - ha11))  # fmt: skip
+    _add_block(J, r, j, b, al * g1x * g2x - be * hb00, al * g1x * g2y - be * hb01, al * g1y * g2x - be * hb01,
+               al * g1y * g2y - be * hb11)  # fmt: skip
+    _add_block(J, r, b, j, al * g2x * g1x - be * hb00, al * g2x * g1y - be * hb01, al * g2y * g1x - be * hb01,
+               al * g2y * g1y - be * hb11)  # fmt: skip
+    _add_block(J, r, b, b, al * g2x * g2x + be * hb00, al * g2x * g2y + be * hb01, al * g2y * g2x + be * hb01,
+               al * g2y * g2y + be * hb11)  # fmt: skip
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _momentum_block(J, r, a, b, sa, sb, am, hd, hc, nx, ny, d00, d01, d10, d11):
+    """``fluid_momentum``'s block (a, b) of one edge for lane r (its loop body; sa, sb: -1 or 1)."""
+    h = hc * sa * sb
+    _add_block(
+        J,
+        r,
+        a,
+        b,
+        am * nx * nx + hd * (sb * d00 - sa * d00) - h * nx * nx,
+        am * nx * ny + hd * (sb * d01 - sa * d10) - h * nx * ny,
+        am * ny * nx + hd * (sb * d10 - sa * d01) - h * ny * nx,
+        am * ny * ny + hd * (sb * d11 - sa * d11) - h * ny * ny,
+    )
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _edge(q, v, i, r):
+    """Edge i of lane r: ``edge_frame``'s (l, tx, ty, nx, ny, vx, vy, vt, vn), the same arithmetic."""
+    ex = q[_ix(2 * i + 2, r)] - q[_ix(2 * i, r)]
+    ey = q[_ix(2 * i + 3, r)] - q[_ix(2 * i + 1, r)]
+    l = math.sqrt(ex * ex + ey * ey)
+    tx, ty = ex / l, ey / l
+    nx, ny = -ty, tx
+    vx = 0.5 * (v[_ix(2 * i, r)] + v[_ix(2 * i + 2, r)])
+    vy = 0.5 * (v[_ix(2 * i + 1, r)] + v[_ix(2 * i + 3, r)])
+    return l, tx, ty, nx, ny, vx, vy, vx * tx + vy * ty, vx * nx + vy * ny
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _turning(q, j, r):
+    """``geometry.turning`` at node j of lane r, the same arithmetic."""
+    ax = q[_ix(2 * j, r)] - q[_ix(2 * j - 2, r)]
+    ay = q[_ix(2 * j + 1, r)] - q[_ix(2 * j - 1, r)]
+    bx = q[_ix(2 * j + 2, r)] - q[_ix(2 * j, r)]
+    by = q[_ix(2 * j + 3, r)] - q[_ix(2 * j + 1, r)]
+    la = math.sqrt(ax * ax + ay * ay)
+    lb = math.sqrt(bx * bx + by * by)
+    tax, tay, tbx, tby = ax / la, ay / la, bx / lb, by / lb
+    kap = 2.0 * (tax * tby - tay * tbx) / (1.0 + (tax * tbx + tay * tby))
+    g0x, g0y = -tay / la, tax / la
+    g2x, g2y = -tby / lb, tbx / lb
+    return kap, g0x, g0y, -g0x - g2x, -g0y - g2y, g2x, g2y, tax, tay, tbx, tby, la, lb
+
+
+@njit(cache=True, error_model="numpy")
+def residual(x, p, dt, jac, res):
+    """``stepper._be_residual`` in water with the consistent added mass, for every lane of a block.
+
+    ``x`` is the block's :func:`allocate` arrays, ``p`` its lane parameters (``L_*`` rows). Writes
+    ``q = q0 + dt v``, the forces ``F``, the residual ``R``, ``v - v0`` into ``A`` and, if
+    ``jac``, the Jacobian into ``J``; per lane into ``res`` (``L_NORM2``, ``L_RMAX``,
+    ``L_PFLUID``). ``jac`` is a constant in each compiled body (see the module docstring).
+
+    The damping terms are computed for every lane, where ``assemble`` skips them for a zero
+    coefficient: a branch in a lane loop keeps it scalar. A zero coefficient adds signed zeros
+    there, which change no force and no entry of the band (its entries start at +0 and only
+    add, so none is -0). A lane whose velocity is not finite could differ; its residual is not
+    finite either, and ``newton`` solves it by ``_be_newton``.
+    """
+    if jac:
+        _residual(x, p, dt, True, res)
+    else:
+        _residual(x, p, dt, False, res)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _residual(x, p, dt, jac, res):
+    """The body of :func:`residual`: ``_be_residual``'s operations in its order, lane by lane."""
+    q, v, q0, v0, fext, m, p0, kbar, lbar, F, R, A, J = x[:13]
+    n2 = q.size // LANES
+    cx, cv = -dt * dt, -dt
+    for i in range(n2):
+        for r in range(LANES):
+            q[_ix(i, r)] = q0[_ix(i, r)] + dt * v[_ix(i, r)]
+            F[_ix(i, r)] = fext[_ix(i, r)]
+            A[_ix(i, r)] = v[_ix(i, r)] - v0[_ix(i, r)]
+    if jac:
+        J[:] = 0.0
+    for k in range(n2 // 2 - 1):  # stretching
+        for r in range(LANES):
+            ex = q[_ix(2 * k + 2, r)] - q[_ix(2 * k, r)]
+            ey = q[_ix(2 * k + 3, r)] - q[_ix(2 * k + 1, r)]
+            l = math.sqrt(ex * ex + ey * ey)
+            tx, ty = ex / l, ey / l
+            lb, EA, d = lbar[_ix(k, r)], p[L_EA, r], p[L_D, r]
+            f = -EA * (l / lb - 1.0)
+            dvx, dvy = v[_ix(2 * k + 2, r)] - v[_ix(2 * k, r)], v[_ix(2 * k + 3, r)] - v[_ix(2 * k + 1, r)]
+            ldot = tx * dvx + ty * dvy
+            f -= d * ldot  # assemble skips it for d = 0, where it only changes the sign of a zero f
+            F[_ix(2 * k + 2, r)] += f * tx
+            F[_ix(2 * k + 3, r)] += f * ty
+            F[_ix(2 * k, r)] -= f * tx
+            F[_ix(2 * k + 1, r)] -= f * ty
+            if jac:
+                a1, a2 = EA / lb, -f / l
+                s00 = cx * (a1 * tx * tx + a2 * (1.0 - tx * tx)) + cv * d * tx * tx
+                s01 = cx * (a1 - a2) * tx * ty + cv * d * tx * ty
+                s11 = cx * (a1 * ty * ty + a2 * (1.0 - ty * ty)) + cv * d * ty * ty
+                _add_block(J, r, k, k, -s00, -s01, -s01, -s11)
+                _add_block(J, r, k, k + 1, s00, s01, s01, s11)
+                _add_block(J, r, k + 1, k, s00, s01, s01, s11)
+                _add_block(J, r, k + 1, k + 1, -s00, -s01, -s01, -s11)
+                px, py = cx * d * (dvx - ldot * tx) / l, cx * d * (dvy - ldot * ty) / l
+                t00, t01, t10, t11 = tx * px, tx * py, ty * px, ty * py
+                _add_block(J, r, k, k, -t00, -t01, -t10, -t11)
+                _add_block(J, r, k, k + 1, t00, t01, t10, t11)
+                _add_block(J, r, k + 1, k, t00, t01, t10, t11)
+                _add_block(J, r, k + 1, k + 1, -t00, -t01, -t10, -t11)
+    for j in range(1, n2 // 2 - 1):  # bending
+        for r in range(LANES):
+            kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = _turning(q, j, r)
+            kb = p[L_EI, r] / (0.5 * (lbar[_ix(j - 1, r)] + lbar[_ix(j, r)]))
+            dk = kap - kbar[_ix(j - 1, r)]
+            w = 1.0 + 0.25 * kap * kap
+            db = p[L_DB, r]
+            phidot = (
+                g0x * v[_ix(2 * j - 2, r)]
+                + g0y * v[_ix(2 * j - 1, r)]
+                + g1x * v[_ix(2 * j, r)]
+                + g1y * v[_ix(2 * j + 1, r)]
+                + g2x * v[_ix(2 * j + 2, r)]
+                + g2y * v[_ix(2 * j + 3, r)]
+            )
+            s = kb * dk * w + db * w * w * phidot
+            F[_ix(2 * j - 2, r)] -= s * g0x
+            F[_ix(2 * j - 1, r)] -= s * g0y
+            F[_ix(2 * j, r)] -= s * g1x
+            F[_ix(2 * j + 1, r)] -= s * g1y
+            F[_ix(2 * j + 2, r)] -= s * g2x
+            F[_ix(2 * j + 3, r)] -= s * g2y
+            if jac:
+                s2 = kb * (w * w + dk * 0.5 * kap * w) + db * w * w * kap * phidot
+                alpha = -(cx * s2 + cv * db * w * w)
+                beta = -cx * (kb * dk * w + db * w * w * phidot)
+                ia, ib = 1.0 / (la * la), 1.0 / (lbn * lbn)
+                ha00, ha01, ha11 = 2.0 * tax * tay * ia, (tay * tay - tax * tax) * ia, -2.0 * tax * tay * ia
+                hb00, hb01, hb11 = 2.0 * tbx * tby * ib, (tby * tby - tbx * tbx) * ib, -2.0 * tbx * tby * ib
+                ux, uy = v[_ix(2 * j, r)] - v[_ix(2 * j - 2, r)], v[_ix(2 * j + 1, r)] - v[_ix(2 * j - 1, r)]
+                wx, wy = v[_ix(2 * j + 2, r)] - v[_ix(2 * j, r)], v[_ix(2 * j + 3, r)] - v[_ix(2 * j + 1, r)]
+                r0x, r0y = ha00 * ux + ha01 * uy, ha01 * ux + ha11 * uy
+                r2x, r2y = hb00 * wx + hb01 * wy, hb01 * wx + hb11 * wy
+                r1x, r1y = -r0x - r2x, -r0y - r2y
+                c = -cx * db * w * w
+                _damping_blocks(J, r, j - 1, j, c * g0x, c * g0y, r0x, r0y, r1x, r1y, r2x, r2y)
+                _damping_blocks(J, r, j, j, c * g1x, c * g1y, r0x, r0y, r1x, r1y, r2x, r2y)
+                _damping_blocks(J, r, j + 1, j, c * g2x, c * g2y, r0x, r0y, r1x, r1y, r2x, r2y)
+                _bending_blocks(
+                    J, r, j, alpha, beta, g0x, g0y, g1x, g1y, g2x, g2y, ha00, ha01, ha11, hb00, hb01, hb11
+                )
+    for r in range(LANES):
+        res[L_PFLUID, r] = 0.0
+    for i in range(n2 // 2 - 1):  # drag
+        for r in range(LANES):
+            l, tx, ty, nx, ny, vx, vy, vt, vn = _edge(q, v, i, r)
+            ct, cn = p[L_CT, r], p[L_CN, r]
+            gt = vt + vt * abs(vt)
+            gn = vn + vn * abs(vn)
+            fx = -ct * l * gt * tx - cn * l * gn * nx
+            fy = -ct * l * gt * ty - cn * l * gn * ny
+            res[L_PFLUID, r] -= fx * vx + fy * vy
+            F[_ix(2 * i, r)] += 0.5 * fx
+            F[_ix(2 * i + 1, r)] += 0.5 * fy
+            F[_ix(2 * i + 2, r)] += 0.5 * fx
+            F[_ix(2 * i + 3, r)] += 0.5 * fy
+            if jac:
+                dgt = 1.0 + 2.0 * abs(vt)
+                dgn = 1.0 + 2.0 * abs(vn)
+                qv = 0.25 * cv
+                c00 = -qv * l * (ct * dgt * tx * tx + cn * dgn * nx * nx)
+                c01 = -qv * l * (ct * dgt * tx * ty + cn * dgn * nx * ny)
+                c11 = -qv * l * (ct * dgt * ty * ty + cn * dgn * ny * ny)
+                hx = 0.5 * cx
+                d00 = -hx * (
+                    ct * (gt * tx * tx + dgt * vn * tx * nx + gt * nx * nx)
+                    + cn * (gn * nx * tx - dgn * vt * nx * nx - gn * tx * nx)
+                )
+                d01 = -hx * (
+                    ct * (gt * tx * ty + dgt * vn * tx * ny + gt * nx * ny)
+                    + cn * (gn * nx * ty - dgn * vt * nx * ny - gn * tx * ny)
+                )
+                d10 = -hx * (
+                    ct * (gt * ty * tx + dgt * vn * ty * nx + gt * ny * nx)
+                    + cn * (gn * ny * tx - dgn * vt * ny * nx - gn * ty * nx)
+                )
+                d11 = -hx * (
+                    ct * (gt * ty * ty + dgt * vn * ty * ny + gt * ny * ny)
+                    + cn * (gn * ny * ty - dgn * vt * ny * ny - gn * ty * ny)
+                )
+                _add_block(J, r, i, i, c00 - d00, c01 - d01, c01 - d10, c11 - d11)
+                _add_block(J, r, i, i + 1, c00 + d00, c01 + d01, c01 + d10, c11 + d11)
+                _add_block(J, r, i + 1, i, c00 - d00, c01 - d01, c01 - d10, c11 - d11)
+                _add_block(J, r, i + 1, i + 1, c00 + d00, c01 + d01, c01 + d10, c11 + d11)
+    for i in range(n2):
+        for r in range(LANES):
+            R[_ix(i, r)] = m[_ix(i, r)] * A[_ix(i, r)] - dt * F[_ix(i, r)]
+    if jac:
+        for i in range(n2):
+            for r in range(LANES):
+                J[_jx(i, KL, r)] += m[_ix(i, r)]
+    for i in range(n2 // 2 - 1):  # the water's momentum: fluid_momentum(sp = 1, sg = -dt)
+        for r in range(LANES):
+            l, tx, ty, nx, ny, vx, vy, vt, vn = _edge(q, v, i, r)
+            cm = p[L_CM, r]
+            sp, sg = 1.0, -dt
+            pn = 0.5 * sp * cm * l * vn
+            gt = sg * cm * 0.5 * vn * vn
+            gn = -sg * cm * vn * vt
+            gx, gy = gt * tx + gn * nx, gt * ty + gn * ny
+            R[_ix(2 * i, r)] += pn * nx - gx
+            R[_ix(2 * i + 1, r)] += pn * ny - gy
+            R[_ix(2 * i + 2, r)] += pn * nx + gx
+            R[_ix(2 * i + 3, r)] += pn * ny + gy
+            if jac:
+                am = 0.25 * cm * l
+                d00 = cm * (-vt * nx * nx + vn * (nx * tx - tx * nx))
+                d01 = cm * (-vt * nx * ny + vn * (nx * ty - tx * ny))
+                d10 = cm * (-vt * ny * nx + vn * (ny * tx - ty * nx))
+                d11 = cm * (-vt * ny * ny + vn * (ny * ty - ty * ny))
+                hc = dt * dt * cm / l * (vt * vt - 0.5 * vn * vn)
+                hd = 0.5 * dt
+                _momentum_block(J, r, i, i, -1.0, -1.0, am, hd, hc, nx, ny, d00, d01, d10, d11)
+                _momentum_block(J, r, i, i + 1, -1.0, 1.0, am, hd, hc, nx, ny, d00, d01, d10, d11)
+                _momentum_block(J, r, i + 1, i, 1.0, -1.0, am, hd, hc, nx, ny, d00, d01, d10, d11)
+                _momentum_block(J, r, i + 1, i + 1, 1.0, 1.0, am, hd, hc, nx, ny, d00, d01, d10, d11)
+    for r in range(LANES):
+        res[L_NORM2, r] = 0.0
+        res[L_RMAX, r] = 0.0
+    for i in range(n2):
+        for r in range(LANES):
+            e = R[_ix(i, r)] - p0[_ix(i, r)]
+            R[_ix(i, r)] = e
+            res[L_NORM2, r] += e * e
+            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) / m[_ix(i, r)])
+
+
+@njit(cache=True, error_model="numpy")
+def factor(J, kept, n):
+    """``band_factor`` of every lane's band in place, where it keeps every diagonal pivot.
+
+    ``kept[r]`` becomes False where ``band_factor`` would exchange rows (or find the band
+    singular); that lane's factors are then not ``band_factor``'s. Where the band is whole
+    (``k + KL < n``, ``k + KU < n``) each lane's column is straight-line code, as in
+    ``band_factor``'s own loops of constant length, with its skip of zero multipliers.
+    """
+    for r in range(LANES):
+        kept[r] = True
+    for k in range(n):
+        whole = k + KL < n and k + KU < n
+        for r in range(LANES):  # band_factor's test: the diagonal >= threshold x the largest below
+            diag = abs(J[_jx(k, KL, r)])
+            best = diag
+            if whole:
+                for e in range(1, KL + 1):
+                    best = max(best, abs(J[_jx(k + e, KL - e, r)]))
+            else:
+                for i in range(k + 1, n):
+                    best = max(best, abs(J[_jx(i, k - i + KL, r)]))
+            kept[r] = kept[r] and diag >= PIVOT_THRESHOLD * best and best > 0.0
+        if whole:
+            for r in range(LANES):
+                pivot = J[_jx(k, KL, r)]
+                for e in range(1, KL + 1):
+                    f = J[_jx(k + e, KL - e, r)] / pivot
+                    J[_jx(k + e, KL - e, r)] = f
+                    if f != 0.0:
+                        for c in range(1, KU + 1):
+                            J[_jx(k + e, KL - e + c, r)] -= f * J[_jx(k, KL + c, r)]
+            continue
+        for i in range(k + 1, min(n, k + KL + 1)):
+            for r in range(LANES):
+                f = J[_jx(i, k - i + KL, r)] / J[_jx(k, KL, r)]
+                J[_jx(i, k - i + KL, r)] = f
+                if f != 0.0:
+                    for j in range(k + 1, min(n - 1, k + KU) + 1):
+                        J[_jx(i, j - i + KL, r)] -= f * J[_jx(k, j - k + KL, r)]
+
+
+@njit(cache=True, error_model="numpy")
+def solve(J, b, n):
+    """``band_solve`` for every lane with the factors of :func:`factor` (no row exchanges), in place in ``b``."""
+    for k in range(n):  # loops of the constant KL or KU where the band is whole, as band_solve's
+        whole = k + KL < n
+        for r in range(LANES):
+            bk = b[_ix(k, r)]
+            if bk != 0.0:
+                if whole:
+                    for e in range(1, KL + 1):
+                        b[_ix(k + e, r)] -= J[_jx(k + e, KL - e, r)] * bk
+                else:
+                    for i in range(k + 1, n):
+                        b[_ix(i, r)] -= J[_jx(i, k - i + KL, r)] * bk
+    for k in range(n - 1, -1, -1):
+        whole = k + KU < n
+        for r in range(LANES):
+            s = b[_ix(k, r)]
+            if whole:
+                for e in range(1, KU + 1):
+                    s -= J[_jx(k, KL + e, r)] * b[_ix(k + e, r)]
+            else:
+                for j in range(k + 1, n):
+                    s -= J[_jx(k, j - k + KL, r)] * b[_ix(j, r)]
+            b[_ix(k, r)] = s / J[_jx(k, KL, r)]
+
+
+@njit(cache=True, error_model="numpy")
+def allocate(n2):
+    """A block's flat arrays for robots of ``n2 = 2N`` unknowns (see :func:`gather`).
+
+    q, v, q0, v0, fext, m, p0, kbar, lbar, F, R, A, J, then Newton's vacc and dv.
+    """
+    n, N = n2 * LANES, n2 // 2
+    z = np.zeros
+    return (z(n), z(n), z(n), z(n), z(n), z(n), z(n), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z(n),
+            z(n2 * WIDTH * LANES), z(n), z(n))  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def eligible(prm):
+    """True if a robot's stages can be solved here: water, the consistent added mass."""
+    return int(prm[P_MEDIUM]) == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT
+
+
+@njit(cache=True, error_model="numpy")
+def gather(s, first, x, p):
+    """Copy the stage's start of robots ``first`` .. ``first + LANES - 1`` (stacked ``SimArrays`` ``s``) into the block."""
+    q, v, q0, v0, fext, m, p0, kbar, lbar = x[:9]
+    n2 = s.q.shape[1]
+    for r in range(LANES):
+        i = first + r
+        buf, prm = s.buf[i], s.prm[i]
+        for k in range(n2):
+            q[_ix(k, r)] = s.q[i, k]
+            v[_ix(k, r)] = s.v[i, k]
+            q0[_ix(k, r)] = buf[B_Q0, k]
+            v0[_ix(k, r)] = buf[B_V0, k]
+            fext[_ix(k, r)] = buf[B_FEXT, k]
+            m[_ix(k, r)] = buf[B_M, k]
+            p0[_ix(k, r)] = buf[B_P0, k]
+        for k in range(s.kbar.shape[1]):
+            kbar[_ix(k, r)] = s.kbar[i, k]
+        for k in range(s.lbar.shape[1]):
+            lbar[_ix(k, r)] = s.lbar[i, k]
+        p[L_EA, r], p[L_EI, r], p[L_D, r], p[L_DB, r] = prm[P_EA], prm[P_EI], prm[P_DSTRETCH], prm[P_DBEND]
+        p[L_CT, r] = 0.25 * prm[P_RHO] * math.pi * prm[P_CF] * (prm[P_A] + prm[P_B])  # as assemble
+        p[L_CN, r] = prm[P_RHO] * prm[P_CD] * prm[P_A]
+        p[L_CM, r] = forces.added_mass_coefficient(prm)
+        p[L_TOL, r], p[L_MAXIT, r], p[L_CHORD, r] = prm[P_TOL], prm[P_MAXIT], prm[P_CHORD]
+
+
+@njit(cache=True, error_model="numpy")
+def newton(s, first, go, x, p, dt, result):
+    """:func:`stepper._be_newton` in water for the lanes with ``go[r]``, bit for bit.
+
+    Lane r is robot ``first + r`` of the stacked ``SimArrays`` ``s``, set up for the stage by
+    ``sdirk2_stage_start``. The block solves the common path (module docstring); a lane off it
+    is solved by ``_be_newton`` on its own arrays. Writes each lane's ``_be_newton`` result
+    (status, iterations, residual, fluid power, friction power) into ``result`` (5, LANES).
+    Returns how many lanes the block solved (the rest went to ``_be_newton``).
+    """
+    q, v, _, _, _, _, _, _, _, F, R, A, J, vacc, dv = x
+    n2 = s.q.shape[1]
+    res = np.empty((N_LANE_RES, LANES))
+    res1 = np.empty((N_LANE_RES, LANES))
+    kept = np.empty(LANES, dtype=np.bool_)
+    on = np.zeros(LANES, dtype=np.bool_)  # lanes on the common path
+    done = np.zeros(LANES, dtype=np.int64)  # 0: going on; else 1 + the iterations it converged in
+    gather(s, first, x, p)
+    residual(x, p, dt, True, res)
+    for r in range(LANES):
+        if not go[r]:
+            continue
+        if res[L_RMAX, r] <= p[L_TOL, r]:
+            on[r], done[r] = True, 1
+        else:  # an iteration cap of 0 or a non-finite start: _be_newton gives up, it says why
+            on[r] = int(p[L_MAXIT, r]) > 0 and math.isfinite(res[L_NORM2, r])
+    iterate = on & (done == 0)
+    if iterate.any():
+        # the Newton step: factors, solve, the full step accepted if |R|^2 falls
+        factor(J, kept, n2)
+        for k in range(n2 * LANES):
+            vacc[k] = v[k]
+            dv[k] = -R[k]
+        solve(J, dv, n2)
+        for k in range(n2):
+            for r in range(LANES):
+                if iterate[r]:
+                    v[_ix(k, r)] = vacc[_ix(k, r)] + 1.0 * dv[_ix(k, r)]
+        residual(x, p, dt, False, res1)
+        for r in range(LANES):
+            if not iterate[r]:
+                continue
+            if not (kept[r] and res1[L_NORM2, r] < res[L_NORM2, r] * (1.0 - 1e-4 * 1.0)):
+                on[r] = False  # a row exchange, or a line search
+            elif res1[L_RMAX, r] <= p[L_TOL, r]:
+                done[r] = 2
+            elif not (
+                1 < int(p[L_MAXIT, r])
+                and math.isfinite(res1[L_NORM2, r])
+                and res1[L_RMAX, r] <= p[L_CHORD, r] * res[L_RMAX, r]
+            ):
+                on[r] = False  # a renewed Jacobian, or the cap
+        chord = on & (done == 0)
+        if chord.any():
+            # the chord step: the same factors, accepted if |R|^2 falls
+            for k in range(n2 * LANES):
+                vacc[k] = v[k]
+                dv[k] = -R[k]
+            solve(J, dv, n2)
+            for k in range(n2):
+                for r in range(LANES):
+                    if chord[r]:
+                        v[_ix(k, r)] = vacc[_ix(k, r)] + 1.0 * dv[_ix(k, r)]
+            residual(x, p, dt, False, res)
+            for r in range(LANES):
+                if not chord[r]:
+                    continue
+                if res[L_NORM2, r] < res1[L_NORM2, r] * (1.0 - 1e-4) and res[L_RMAX, r] <= p[L_TOL, r]:
+                    done[r] = 3
+                    res1[L_RMAX, r], res1[L_PFLUID, r] = res[L_RMAX, r], res[L_PFLUID, r]
+                else:
+                    on[r] = False
+    for r in range(LANES):
+        if not go[r]:
+            continue
+        i = first + r
+        si = layout.sim_views(s.f[i], s.ibuf[i])
+        if not on[r]:
+            status, it, rmax, pf, pfr = stepper._be_newton(si, dt, MEDIUM_WATER)
+        else:
+            it = done[r] - 1
+            rmax, pf = (res[L_RMAX, r], res[L_PFLUID, r]) if it == 0 else (res1[L_RMAX, r], res1[L_PFLUID, r])
+            status, pfr = OK, 0.0
+            out = si.out
+            out[O_NJAC] += 1.0
+            out[O_NRES] += it
+            out[O_NFACTOR] += 1.0 if it > 0 else 0.0
+            buf = si.buf
+            for k in range(n2):
+                si.q[k] = q[_ix(k, r)]
+                si.v[k] = v[_ix(k, r)]
+                buf[B_F, k] = F[_ix(k, r)]
+                buf[B_R, k] = R[_ix(k, r)]
+                buf[B_A, k] = A[_ix(k, r)]
+        result[0, r], result[1, r], result[2, r], result[3, r], result[4, r] = status, it, rmax, pf, pfr
+    return (on & go).sum()

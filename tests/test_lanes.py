@@ -1,0 +1,230 @@
+"""Sixteen eels per instruction (``physics.lanes``): every lane bit for bit what the scalar kernels give.
+
+The block's residual, factorization, solve and Newton solve against ``_be_residual``,
+``band_factor``, ``band_solve`` and ``_be_newton`` on the same robots, with lanes that differ in
+their physics (damping on and off, stiffness, density), lanes that leave the common path, and
+counts that show the block itself solved the lanes it says it did.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numba import njit
+
+from soft_snake_gym import Fluid, Rod, SimConfig
+from soft_snake_gym.envs import SoftVectorEnv
+from soft_snake_gym.envs import task as T
+from soft_snake_gym.physics import banded, lanes, stepper
+from soft_snake_gym.physics import layout as L
+from soft_snake_gym.physics.layout import SimArrays
+
+LANES = lanes.LANES
+DT = stepper.GAMMA * 0.01  # SDIRK2's stage at the default h
+
+
+def _eels(seed: int, steps: int = 30) -> SoftVectorEnv:
+    """16 eels of different physics after ``steps`` random actions.
+
+    Lanes 0-3 without any damping, half the others with stretching damping too.
+    """
+    venv = SoftVectorEnv("SoftEel-v0", LANES, num_threads=1, max_episode_steps=None)
+    venv.reset(seed=seed)
+    for i, sim in enumerate(venv.batch.sims):
+        damped = i >= 4
+        rod = Rod(
+            E_bend=1e5 * (1 + i % 5),
+            damping_bend=0.5 * (1 + i % 3) if damped else 0.0,
+            damping_stretch=20.0 * (i % 2) if damped else 0.0,
+        )
+        sim.set_config(SimConfig(fluid=Fluid(rho=900 + 20 * i), rod=rod))
+    rng = np.random.default_rng(seed)
+    for _ in range(steps):
+        venv.advance(rng.uniform(-1, 1, (LANES, 8)), np.ones(LANES, dtype=bool))
+    return venv
+
+
+@njit(cache=True)
+def _start_stages(s, t, stage):
+    """Every robot's action to rates and the start of SDIRK2 stage ``stage`` (as robot_step does)."""
+    s, t = SimArrays(*s), T.TaskArrays(*t)
+    for i in range(s.q.shape[0]):
+        si, ti = T._robot(s, t, i)
+        T.step_begin(si, ti)
+        stepper.sdirk2_stage_start(si, stage, si.prm[L.P_H], L.MEDIUM_WATER, ti.uk, ti.ul)
+
+
+@njit(cache=True)
+def _scalar_residuals(s, dt, jac, res):
+    s = SimArrays(*s)
+    for i in range(s.q.shape[0]):
+        r = stepper._be_residual(L.sim_views(s.f[i], s.ibuf[i]), dt, L.MEDIUM_WATER, jac)
+        res[0, i], res[1, i], res[2, i] = r[0], r[1], r[2]
+
+
+@njit(cache=True)
+def _block_residuals(s, dt, jac, res):
+    s = SimArrays(*s)
+    x = lanes.allocate(s.q.shape[1])
+    p = np.empty((lanes.N_LANE_PRM, LANES))
+    lanes.gather(s, 0, x, p)
+    lanes.residual(x, p, dt, jac, res)
+    return x
+
+
+@njit(cache=True)
+def _scalar_newton(s, dt, result):
+    s = SimArrays(*s)
+    for i in range(s.q.shape[0]):
+        r = stepper._be_newton(L.sim_views(s.f[i], s.ibuf[i]), dt, L.MEDIUM_WATER)
+        result[0, i], result[1, i], result[2, i], result[3, i], result[4, i] = r
+
+
+@njit(cache=True)
+def _block_newton(s, go, dt, result):
+    s = SimArrays(*s)
+    x = lanes.allocate(s.q.shape[1])
+    return lanes.newton(s, 0, go, x, np.empty((lanes.N_LANE_PRM, LANES)), dt, result)
+
+
+def _flat(a: np.ndarray) -> np.ndarray:
+    """(LANES, ...) -> the block's flat layout, element i of lane r at i * LANES + r."""
+    return np.ascontiguousarray(a.reshape(LANES, -1).T).ravel()
+
+
+def _unflat(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    return a.reshape(-1, LANES).T.reshape(shape)
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    """The float64 bit patterns (signed zeros told apart)."""
+    return np.ascontiguousarray(a).view(np.int64)
+
+
+@pytest.mark.parametrize("jac", [False, True])
+def test_the_block_residual_is_be_residual_bit_for_bit(jac):
+    venv = _eels(seed=1)
+    sim, task = venv.batch.sim, venv.batch.task
+    _start_stages(tuple(sim), tuple(task), 0)
+    f0 = sim.f.copy()
+    res = np.empty((3, LANES))
+    _scalar_residuals(tuple(sim), DT, jac, res)
+    ref = L.sim_arrays_over(sim.f.copy(), sim.ibuf)
+    sim.f[:] = f0
+    res_b = np.empty((3, LANES))
+    x = _block_residuals(tuple(sim), DT, jac, res_b)
+    q, F, R, A, J = x[0], x[9], x[10], x[11], x[12]
+    assert np.array_equal(_bits(res_b), _bits(res))  # |R|^2, max |R|/m, drag power
+    for flat, want in ((q, ref.q), (F, ref.buf[:, L.B_F]), (R, ref.buf[:, L.B_R]), (A, ref.buf[:, L.B_A])):
+        assert np.array_equal(_bits(_unflat(flat, want.shape)), _bits(want))
+    if jac:
+        assert np.array_equal(_bits(_unflat(J, ref.J.shape)), _bits(ref.J))
+    assert np.unique(ref.prm[:, L.P_DBEND]).size > 2  # the lanes' damping really differs
+
+
+def test_the_block_factor_and_solve_are_band_factor_and_band_solve_bit_for_bit():
+    """On the eels' backward-Euler bands, and on one lane that needs a row exchange (flagged)."""
+    venv = _eels(seed=2)
+    sim = venv.batch.sim
+    _start_stages(tuple(sim), tuple(venv.batch.task), 0)
+    _scalar_residuals(tuple(sim), DT, True, np.empty((3, LANES)))
+    bands = np.array(sim.J)
+    n = bands.shape[1]
+    below = max(abs(bands[5, e, banded.KL - e]) for e in range(1, banded.KL + 1))
+    bands[5, 0, banded.KL] = 0.01 * below  # lane 5's first pivot far below an entry under it
+    rng = np.random.default_rng(0)
+    b = rng.standard_normal((LANES, n))
+    J_ref, b_ref, piv = bands.copy(), b.copy(), np.zeros((LANES, n), dtype=np.int64)
+    for r in range(LANES):
+        assert banded.band_factor(J_ref[r], piv[r], n, banded.PIVOT_THRESHOLD)
+        banded.band_solve(J_ref[r], piv[r], n, b_ref[r])
+    J_flat, b_flat, kept = _flat(bands), _flat(b), np.zeros(LANES, dtype=np.bool_)
+    lanes.factor(J_flat, kept, n)
+    lanes.solve(J_flat, b_flat, n)
+    exchanged = (piv != np.arange(n)).any(axis=1)
+    assert exchanged.tolist() == [r == 5 for r in range(LANES)]
+    assert kept.tolist() == (~exchanged).tolist()
+    ok = ~exchanged
+    assert np.array_equal(_bits(_unflat(J_flat, bands.shape)[ok]), _bits(J_ref[ok]))
+    assert np.array_equal(_bits(_unflat(b_flat, b.shape)[ok]), _bits(b_ref[ok]))
+
+
+@pytest.mark.parametrize("stage", [0, 1])
+def test_the_block_newton_leaves_every_robot_as_be_newton(stage):
+    """Both SDIRK2 stages, with lanes off the common path.
+
+    Lane 7 starts with a NaN velocity, lane 9 with a Newton cap of one iteration, lane 11 renews
+    its Jacobian (no chord steps, a tolerance one step cannot meet), lane 13 sits out: they go
+    to ``_be_newton`` or stay put; the block solves the rest.
+    """
+    venv = _eels(seed=3)
+    sim, task = venv.batch.sim, venv.batch.task
+    if stage == 1:  # the first stage solved, robot by robot
+        _start_stages(tuple(sim), tuple(task), 0)
+        _scalar_newton(tuple(sim), DT, np.empty((5, LANES)))
+    sim.prm[9, L.P_MAXIT] = 1
+    sim.prm[11, L.P_CHORD] = 0.0
+    sim.prm[11, L.P_TOL] = 1e-14
+    go = np.ones(LANES, dtype=np.bool_)
+    go[13] = False
+    if stage == 0:
+        _start_stages(tuple(sim), tuple(task), 0)
+    else:
+        for i in range(LANES):
+            stepper._sdirk2_second_start(venv.batch.sims[i].arrays, L.MEDIUM_WATER)
+    sim.v[7, 4] = np.nan
+    f0, i0 = sim.f.copy(), sim.ibuf.copy()
+    want = np.empty((5, LANES))
+    _scalar_newton(tuple(sim), DT, want)
+    f_ref = sim.f.copy()
+    sim.f[:], sim.ibuf[:] = f0, i0
+    got = np.empty((5, LANES))
+    solved = _block_newton(tuple(sim), go, DT, got)
+    ref = L.sim_arrays_over(f_ref, i0)
+    new = L.sim_arrays_over(sim.f, sim.ibuf)
+    ran = go.copy()
+    assert np.array_equal(_bits(got[:, ran]), _bits(want[:, ran]))
+    for name in ("q", "v", "out"):
+        assert np.array_equal(_bits(getattr(new, name)[ran]), _bits(getattr(ref, name)[ran])), name
+    for row in (L.B_F, L.B_R, L.B_A, L.B_Q0, L.B_V0, L.B_P0):
+        assert np.array_equal(_bits(new.buf[ran, row]), _bits(ref.buf[ran, row]))
+    assert np.array_equal(_bits(new.f[13]), _bits(f0[13]))  # the lane that sat out is untouched
+    assert want[0, 7] == L.NOT_CONVERGED and want[1, 11] > 1  # those lanes really left the path
+    assert solved == LANES - 4  # ... and the block solved all the others itself
+
+
+def test_the_vector_env_steps_blocks_and_leftovers_as_single_envs_with_two_threads():
+    """35 eels (two blocks, three robots one by one) against the same eels robot by robot."""
+    n = 2 * LANES + 3
+    rng = np.random.default_rng(7)
+    actions = rng.uniform(-1, 1, (60, n, 8))
+    runs = []
+    for blocks in (True, False):
+        venv = SoftVectorEnv("SoftEel-v0", n, num_threads=2, max_episode_steps=None, max_curvature_rate=30.0)
+        venv.reset(seed=4)
+        sim, task = venv.batch.sim, venv.batch.task
+        status = np.zeros(n, dtype=np.int64)
+        for a in actions:
+            task.act[:] = a
+            active = status == L.OK
+            if blocks:
+                T.batch_step(active, tuple(sim), tuple(task), status)
+            else:
+                _robot_by_robot(active, tuple(sim), tuple(task), status)
+        s = L.sim_arrays_over(sim.f.copy(), sim.ibuf)  # all but Newton's scratch (band, trial, step)
+        kept_rows = [k for k in range(L.N_BUF) if k not in (L.B_VACC, L.B_DV)]
+        state = [s.q, s.v, s.kbar, s.lbar, s.prm, s.out, s.buf[:, kept_rows], task.f, task.obs]
+        runs.append(([np.array(a) for a in state], status.copy()))
+    (a, status_a), (b, status_b) = runs
+    assert all(np.array_equal(_bits(x), _bits(y)) for x, y in zip(a, b, strict=True))
+    assert np.array_equal(status_a, status_b)
+    assert (status_a == L.OK).sum() > n // 2 and (status_a != L.OK).any()  # most swim, some fail
+
+
+@njit(cache=True)
+def _robot_by_robot(active, s, t, status):
+    s, t = SimArrays(*s), T.TaskArrays(*t)
+    for i in range(status.size):
+        if active[i]:
+            si, ti = T._robot(s, t, i)
+            status[i] = T.robot_step(si, ti)
