@@ -1,7 +1,9 @@
 """Where a robot step's time goes: Newton's work per step and the compiled parts, timed inside numba.
 
-Drives 64 batched eels with uniform random actions (an untrained policy, the benchmark's
-load) and with the thesis gait, counts Newton iterations per step, compares the water's
+Drives 15 batched eels (fewer than a block of ``lanes.LANES``, so robot by robot: the path whose
+kernels it times; the blocks' own parts are in docs/performance.md, "Sixteen eels per
+instruction") with uniform random actions (an untrained policy, the benchmark's load) and with
+the thesis gait, counts Newton iterations per step, compares the water's
 integrators (CPU time per robot step of the batched env on one thread, interleaved rounds in
 this process). Then, for SoftEel-v0 and SoftWorm-v0, counts Newton's work per robot step
 (``Simulator.newton_work``: Jacobian assemblies, residuals alone, factorizations, and the
@@ -100,7 +102,11 @@ def _actions(env_id: str, kind: str, steps: int, robots: int) -> np.ndarray:
     return np.repeat(gait_actions(env, steps)[:, None, :], robots, axis=1)
 
 
-def newton_iterations(actions: str, robots: int = 64, steps: int = 300) -> np.ndarray:
+ROBOTS = 15
+"""Batched robots of the counts and costs: fewer than a block, so each is stepped by ``robot_step``."""
+
+
+def newton_iterations(actions: str, robots: int = ROBOTS, steps: int = 300) -> np.ndarray:
     """Fraction of robot steps taking 0, 1, 2, ... Newton iterations, under random or gait actions."""
     venv = gym.make_vec("SoftEel-v0", num_envs=robots, num_threads=1)
     venv.reset(seed=0)
@@ -109,7 +115,7 @@ def newton_iterations(actions: str, robots: int = 64, steps: int = 300) -> np.nd
 
 
 def newton_work(
-    env_id: str, actions: str, robots: int = 64, steps: int = 200
+    env_id: str, actions: str, robots: int = ROBOTS, steps: int = 200
 ) -> tuple[dict[str, float], float]:
     """Newton's work per robot step and the compiled call's wall-clock microseconds per robot step.
 
@@ -204,7 +210,7 @@ def account(env_id: str) -> None:
     for kind in ("random", "gait"):
         work, step = newton_work(env_id, kind)
         newton = sum(work[k] * cost[k] for k in cost)
-        print(f"  Newton's work per robot step, {kind} actions (64 robots, one thread):")
+        print(f"  Newton's work per robot step, {kind} actions ({ROBOTS} robots, one thread):")
         for k in cost:
             print(f"    {k:<16} {work[k]:5.2f} x {cost[k]:5.2f} us = {work[k] * cost[k]:6.2f} us")
         print(
@@ -213,10 +219,10 @@ def account(env_id: str) -> None:
         )
 
 
-def method_costs(methods=("sdirk2", "bdf2", "backward_euler"), robots=64, steps=150, rounds=11) -> None:
+def method_costs(methods=("sdirk2", "bdf2", "backward_euler"), robots=ROBOTS, steps=150, rounds=11) -> None:
     """Print CPU microseconds per robot step and Newton iterations per step of each water integrator.
 
-    64 batched eels on one thread under the same uniform random actions, each round from the
+    ``robots`` batched eels on one thread under the same uniform random actions, each round from the
     same seeded reset; medians of ``rounds`` rounds, the methods interleaved.
     """
     venvs = {
