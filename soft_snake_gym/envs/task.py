@@ -556,26 +556,35 @@ def batch_step(active, s, t, status):
     of ``lanes.LANES`` (:func:`block_step`), the rest one by one.
     """
     s, t = SimArrays(*s), TaskArrays(*t)
-    blocks = status.size // lanes.LANES
-    for b in prange(blocks):
-        _step_block(active, s, t, status, b * lanes.LANES)
-    for i in prange(blocks * lanes.LANES, status.size):
-        if active[i]:
-            si, ti = _robot(s, t, i)
-            status[i] = robot_step(si, ti)
+    for u in prange(_units(status.size)):
+        _step_unit(active, s, t, status, u)
 
 
 @njit(cache=True, error_model="numpy")
 def batch_step_serial(active, s, t, status):
     """:func:`batch_step` on the calling thread alone (no thread-pool launch: for one thread)."""
     s, t = SimArrays(*s), TaskArrays(*t)
+    for u in range(_units(status.size)):
+        _step_unit(active, s, t, status, u)
+
+
+@njit(cache=True, inline="always")
+def _units(n):
+    """The units of work of ``n`` robots: the blocks of ``lanes.LANES``, then each robot left over."""
+    return n // lanes.LANES + n % lanes.LANES
+
+
+@njit(cache=True, error_model="numpy")
+def _step_unit(active, s, t, status, u):
+    """Unit ``u`` of :func:`_units`: a block (:func:`_step_block`) or one robot past the last block."""
     blocks = status.size // lanes.LANES
-    for b in range(blocks):
-        _step_block(active, s, t, status, b * lanes.LANES)
-    for i in range(blocks * lanes.LANES, status.size):
-        if active[i]:
-            si, ti = _robot(s, t, i)
-            status[i] = robot_step(si, ti)
+    if u < blocks:
+        _step_block(active, s, t, status, u * lanes.LANES)
+        return
+    i = blocks * lanes.LANES + (u - blocks)
+    if active[i]:
+        si, ti = _robot(s, t, i)
+        status[i] = robot_step(si, ti)
 
 
 @njit(cache=True, error_model="numpy")

@@ -487,6 +487,23 @@ def gather(s, first, x, p):
 
 
 @njit(cache=True, error_model="numpy")
+def _full_step(x, lanes_on, n2):
+    """``_be_newton``'s update at full length for the lanes ``lanes_on``: ``v = vacc + 1 dv``.
+
+    ``vacc`` = v, ``dv`` = -R solved with the factors in J; the other lanes keep their ``v``.
+    """
+    v, R, J, vacc, dv = x[1], x[10], x[12], x[13], x[14]
+    for k in range(n2 * LANES):
+        vacc[k] = v[k]
+        dv[k] = -R[k]
+    solve(J, dv, n2)
+    for k in range(n2):
+        for r in range(LANES):
+            if lanes_on[r]:
+                v[_ix(k, r)] = vacc[_ix(k, r)] + 1.0 * dv[_ix(k, r)]
+
+
+@njit(cache=True, error_model="numpy")
 def newton(s, first, go, x, p, dt, result):
     """:func:`stepper._be_newton` in water for the lanes with ``go[r]``, bit for bit.
 
@@ -496,7 +513,7 @@ def newton(s, first, go, x, p, dt, result):
     (status, iterations, residual, fluid power, friction power) into ``result`` (5, LANES).
     Returns how many lanes the block solved (the rest went to ``_be_newton``).
     """
-    q, v, _, _, _, _, _, _, _, F, R, A, J, vacc, dv = x
+    q, v, F, R, A, J = x[0], x[1], x[9], x[10], x[11], x[12]
     n2 = s.q.shape[1]
     res = np.empty((N_LANE_RES, LANES))
     res1 = np.empty((N_LANE_RES, LANES))
@@ -516,14 +533,7 @@ def newton(s, first, go, x, p, dt, result):
     if iterate.any():
         # the Newton step: factors, solve, the full step accepted if |R|^2 falls
         factor(J, kept, n2)
-        for k in range(n2 * LANES):
-            vacc[k] = v[k]
-            dv[k] = -R[k]
-        solve(J, dv, n2)
-        for k in range(n2):
-            for r in range(LANES):
-                if iterate[r]:
-                    v[_ix(k, r)] = vacc[_ix(k, r)] + 1.0 * dv[_ix(k, r)]
+        _full_step(x, iterate, n2)
         residual(x, p, dt, False, res1)
         for r in range(LANES):
             if not iterate[r]:
@@ -541,14 +551,7 @@ def newton(s, first, go, x, p, dt, result):
         chord = on & (done == 0)
         if chord.any():
             # the chord step: the same factors, accepted if |R|^2 falls
-            for k in range(n2 * LANES):
-                vacc[k] = v[k]
-                dv[k] = -R[k]
-            solve(J, dv, n2)
-            for k in range(n2):
-                for r in range(LANES):
-                    if chord[r]:
-                        v[_ix(k, r)] = vacc[_ix(k, r)] + 1.0 * dv[_ix(k, r)]
+            _full_step(x, chord, n2)
             residual(x, p, dt, False, res)
             for r in range(LANES):
                 if not chord[r]:
