@@ -44,7 +44,7 @@ def _eels(seed: int, steps: int = 30) -> SoftVectorEnv:
     return venv
 
 
-@njit(cache=True)
+@njit
 def _start_stages(s, t, stage):
     """Every robot's action to rates and the start of SDIRK2 stage ``stage`` (as robot_step does)."""
     s, t = SimArrays(*s), T.TaskArrays(*t)
@@ -54,7 +54,7 @@ def _start_stages(s, t, stage):
         stepper.sdirk2_stage_start(si, stage, si.prm[L.P_H], L.MEDIUM_WATER, ti.uk, ti.ul)
 
 
-@njit(cache=True)
+@njit
 def _scalar_residuals(s, dt, jac, res):
     s = SimArrays(*s)
     for i in range(s.q.shape[0]):
@@ -62,7 +62,7 @@ def _scalar_residuals(s, dt, jac, res):
         res[0, i], res[1, i], res[2, i] = r[0], r[1], r[2]
 
 
-@njit(cache=True)
+@njit
 def _block_residuals(s, dt, jac, res):
     s = SimArrays(*s)
     x = lanes.allocate(s.q.shape[1])
@@ -72,7 +72,7 @@ def _block_residuals(s, dt, jac, res):
     return x
 
 
-@njit(cache=True)
+@njit
 def _scalar_newton(s, dt, result):
     s = SimArrays(*s)
     for i in range(s.q.shape[0]):
@@ -80,7 +80,7 @@ def _scalar_newton(s, dt, result):
         result[0, i], result[1, i], result[2, i], result[3, i], result[4, i] = r
 
 
-@njit(cache=True)
+@njit
 def _block_newton(s, go, dt, result):
     s = SimArrays(*s)
     x = lanes.allocate(s.q.shape[1])
@@ -221,7 +221,7 @@ def test_the_vector_env_steps_blocks_and_leftovers_as_single_envs_with_two_threa
     assert (status_a == L.OK).sum() > n // 2 and (status_a != L.OK).any()  # most swim, some fail
 
 
-@njit(cache=True)
+@njit
 def _robot_by_robot(active, s, t, status):
     s, t = SimArrays(*s), T.TaskArrays(*t)
     for i in range(status.size):

@@ -34,7 +34,7 @@ import math
 import numpy as np
 from numba import njit
 
-from soft_snake_gym.physics import banded, forces, layout, stepper
+from soft_snake_gym.physics import banded, forces, geometry, layout, stepper
 from soft_snake_gym.physics.banded import KL, KU, PIVOT_THRESHOLD, WIDTH
 from soft_snake_gym.physics.cache import drop_stale_cache
 from soft_snake_gym.physics.layout import (
@@ -68,7 +68,8 @@ from soft_snake_gym.physics.layout import (
     P_TOL,
 )
 
-drop_stale_cache(__file__, [banded.__file__, forces.__file__, layout.__file__, stepper.__file__])
+# the cached kernels embed _be_newton and the kernels it calls from these files
+drop_stale_cache(__file__, [m.__file__ for m in (banded, forces, geometry, layout, stepper)])
 
 LANES = 16
 """Robots per block: a compile-time constant, and LLVM's least trip count for a vector loop."""
