@@ -31,6 +31,7 @@ ENDS = {
     "SoftEelPath-v0": dict(max_curvature_rate=30.0, path="sine", randomize={"E": [1e6, 3e6]}),
 }
 ENDS["SoftEel-v0-bdf2"] = dict(ENDS["SoftEel-v0"], integrator={"method": "bdf2"})
+ENDS["SoftEel-v0-sub3"] = dict(ENDS["SoftEel-v0"], integrator={"substeps": 3})
 
 
 def _actions(space: Box, steps: int, seed: int) -> np.ndarray:
@@ -65,19 +66,22 @@ def test_make_vec_returns_the_batched_env_with_batched_spaces(env_id):
 
 @pytest.mark.parametrize(
     ("env_id", "mode"),
-    [(i, AutoresetMode.NEXT_STEP) for i in IDS + ["SoftEelGoal-v0", "SoftEelPath-v0", "SoftEel-v0-bdf2"]]
+    [
+        (i, AutoresetMode.NEXT_STEP)
+        for i in IDS + ["SoftEelGoal-v0", "SoftEelPath-v0", "SoftEel-v0-bdf2", "SoftEel-v0-sub3"]
+    ]
     + [("SoftEel-v0", AutoresetMode.SAME_STEP), ("SoftEelGoal-v0", AutoresetMode.SAME_STEP)],
 )
 def test_matches_sync_vector_env_of_single_envs_bit_for_bit_over_500_steps(env_id, mode):
     """Robot i seeded s + i, with the same actions, is the single env seeded s + i.
 
     Obs, rewards, ends, every info entry and the episode statistics, across failures, time limits
-    and autoresets (with physics randomization drawn anew at each), in both autoreset modes; and
-    under BDF2, whose history each reset starts anew.
+    and autoresets (with physics randomization drawn anew at each), in both autoreset modes; under
+    BDF2, whose history each reset starts anew; and with three SDIRK2 sub-steps per step.
     """
     # a block of 16 robots stepped together (envs.task.block_step) and three one by one
     n, steps, kw = 19, 500 if mode == AutoresetMode.NEXT_STEP else 250, ENDS[env_id]
-    env_id = env_id.removesuffix("-bdf2")
+    env_id = env_id.removesuffix("-bdf2").removesuffix("-sub3")
     batched = gym.make_vec(env_id, num_envs=n, max_episode_steps=90, autoreset_mode=mode, **kw)
     sync = RecordEpisodeStatistics(
         gym.make_vec(

@@ -593,7 +593,10 @@ def _step_block(active, s, t, status, first):
     together = True
     for r in range(lanes.LANES):
         i = first + r
-        together &= active[i] and block_eligible(s.prm[i], t.tp[i]) and s.prm[i, L.P_H] == s.prm[first, L.P_H]
+        together &= active[i] and block_eligible(s.prm[i], t.tp[i])
+        together &= (
+            s.prm[i, L.P_H] == s.prm[first, L.P_H] and s.prm[i, L.P_SUBSTEPS] == s.prm[first, L.P_SUBSTEPS]
+        )
     if together:
         block_step(s, t, first, status)
         return
@@ -606,23 +609,19 @@ def _step_block(active, s, t, status, first):
 
 @njit(cache=True, error_model="numpy")
 def block_eligible(prm, tp):
-    """True if :func:`block_step` takes the robot: one SDIRK2 step per control step, in water."""
-    return (
-        lanes.eligible(prm)
-        and int(prm[L.P_METHOD]) == L.METHOD_SDIRK2
-        and int(prm[L.P_SUBSTEPS]) == 1
-        and int(tp[T_NSUB]) == 1
-    )
+    """True if :func:`block_step` takes the robot: SDIRK2 in water, one step of ``h`` per control step."""
+    return lanes.eligible(prm) and int(prm[L.P_METHOD]) == L.METHOD_SDIRK2 and int(tp[T_NSUB]) == 1
 
 
 @njit(cache=True, error_model="numpy")
 def block_step(s, t, first, status):
     """:func:`robot_step` for the ``LANES`` robots from ``first``, each stage's Newton solve for all at once.
 
-    Every robot must be :func:`block_eligible`. It is :func:`robot_step` with
-    ``stepper.simulate``'s one SDIRK2 step written out around ``lanes.newton``: each robot's
-    task start, each stage's start and end, the step's end and the task's end are the same
-    functions, so every robot ends bit for bit as :func:`robot_step` leaves it.
+    Every robot must be :func:`block_eligible`, with the same ``h`` and sub-steps. It is
+    :func:`robot_step` with ``stepper.simulate``'s step of SDIRK2 sub-steps written out around
+    ``lanes.newton``: each robot's task start, each stage's start and end, the step's end and
+    the task's end are the same functions, and the sums over sub-steps are ``simulate``'s, so
+    every robot ends bit for bit as :func:`robot_step` leaves it.
     """
     n_lanes = lanes.LANES
     x = lanes.allocate(s.q.shape[1])
@@ -632,8 +631,12 @@ def block_step(s, t, first, status):
     before = np.empty((3, n_lanes))
     state = np.full(n_lanes, L.OK)  # each robot's status in the step
     iters = np.zeros(n_lanes, dtype=np.int64)
-    acc = np.zeros((5, n_lanes))  # residual, fluid, damping and friction energy, actuator work
+    acc = np.zeros((5, n_lanes))  # a sub-step's residual, fluid, damping and friction energy, actuator work
+    niter = np.zeros(n_lanes, dtype=np.int64)  # simulate's sums over the sub-steps
+    resid = np.zeros(n_lanes)
+    energy = np.zeros((4, n_lanes))
     go = np.zeros(n_lanes, dtype=np.bool_)
+    ran = np.zeros(n_lanes, dtype=np.bool_)
     for r in range(n_lanes):
         si, ti = _robot(s, t, first + r)
         sq[r] = step_begin(si, ti)
@@ -644,42 +647,48 @@ def block_step(s, t, first, status):
         if si.prm[L.P_LAG] == 0.0:  # stepper.simulate's start of a step
             si.buf[L.B_LRATE, : si.lbar.size] = ti.ul
         si.out[L.O_NJAC] = si.out[L.O_NRES] = si.out[L.O_NFACTOR] = 0.0
-    dt = s.prm[first, L.P_H]  # stepper.simulate's h / nsub, one sub-step
-    for stage in range(2):
+    nsub = int(s.prm[first, L.P_SUBSTEPS])
+    dt = s.prm[first, L.P_H] / nsub  # as stepper.simulate
+    for _ in range(nsub):
         for r in range(n_lanes):
-            go[r] = False
-            if state[r] == L.OK:
-                si, ti = _robot(s, t, first + r)
-                state[r] = stepper.sdirk2_stage_start(si, stage, dt, L.MEDIUM_WATER, ti.uk, ti.ul)
-                go[r] = state[r] == L.OK
-        if not go.any():
+            ran[r] = state[r] == L.OK
+            iters[r] = 0
+            acc[:, r] = 0.0
+        if not ran.any():
             break
-        lanes.newton(s, first, go, x, p, stepper.GAMMA * dt, result)
-        for r in range(n_lanes):
-            if go[r]:
-                si, ti = _robot(s, t, first + r)
-                damped = si.prm[L.P_DBEND] > 0.0 or si.prm[L.P_DSTRETCH] > 0.0
-                newton = (int(result[0, r]), int(result[1, r]), result[2, r], result[3, r], result[4, r])
-                sums = (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r])
-                state[r], (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r]) = (
-                    stepper.sdirk2_stage_end(si, stage, dt, ti.uk, damped, newton, sums)
-                )
+        for stage in range(2):  # stepper._sdirk2_substep
+            for r in range(n_lanes):
+                go[r] = False
+                if state[r] == L.OK:
+                    si, ti = _robot(s, t, first + r)
+                    state[r] = stepper.sdirk2_stage_start(si, stage, dt, L.MEDIUM_WATER, ti.uk, ti.ul)
+                    go[r] = state[r] == L.OK
+            if not go.any():
+                break
+            lanes.newton(s, first, go, x, p, stepper.GAMMA * dt, result)
+            for r in range(n_lanes):
+                if go[r]:
+                    si, ti = _robot(s, t, first + r)
+                    damped = si.prm[L.P_DBEND] > 0.0 or si.prm[L.P_DSTRETCH] > 0.0
+                    newton = (int(result[0, r]), int(result[1, r]), result[2, r], result[3, r], result[4, r])
+                    sums = (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r])
+                    state[r], (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r]) = (
+                        stepper.sdirk2_stage_end(si, stage, dt, ti.uk, damped, newton, sums)
+                    )
+        for r in range(n_lanes):  # simulate's sums of the sub-step
+            if ran[r]:
+                niter[r] = max(niter[r], iters[r])
+                resid[r] = max(resid[r], acc[0, r])
+                for k in range(4):
+                    energy[k, r] += acc[k + 1, r]
     for r in range(n_lanes):
         i = first + r
         if state[r] == BAD_ACTION:
             status[i] = BAD_ACTION
             continue
         si, ti = _robot(s, t, i)
-        # stepper.simulate's end of its one step of one sub-step, from its zeroed sums
         st = stepper.end_step(
-            si,
-            state[r],
-            max(0, iters[r]),
-            max(0.0, acc[0, r]),
-            0.0 + acc[1, r],
-            0.0 + acc[2, r],
-            0.0 + acc[3, r],
-            0.0 + acc[4, r],
+            si, state[r], niter[r], resid[r], energy[0, r], energy[1, r], energy[2, r], energy[3, r]
         )
         stepper.ledger_energies(si)
         step_end(si, ti, st, sq[r], (before[0, r], before[1, r], before[2, r]))
