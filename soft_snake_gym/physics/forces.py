@@ -78,6 +78,42 @@ def elastic_energy(q, kbar, lbar, prm):
     return e
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def drag_jacobian(ct, cn, l, tx, ty, nx, ny, vt, vn, gt, gn, cx, cv):
+    """One edge's drag Jacobian ``cx dF/dq + cv dF/dv`` as :func:`assemble` adds it, in parts.
+
+    Returns (c00, c01, c11): a quarter of ``cv`` d F_edge / d v_edge for each of the four node
+    blocks; (d00, d01, d10, d11): half of ``cx`` d F_edge / d e per node, signed by node.
+    """
+    dgt = 1.0 + 2.0 * abs(vt)
+    dgn = 1.0 + 2.0 * abs(vn)
+    # d F_edge / d v_edge, a quarter of it on each of the four node blocks
+    qv = 0.25 * cv
+    c00 = -qv * l * (ct * dgt * tx * tx + cn * dgn * nx * nx)
+    c01 = -qv * l * (ct * dgt * tx * ty + cn * dgn * nx * ny)
+    c11 = -qv * l * (ct * dgt * ty * ty + cn * dgn * ny * ny)
+    # d F_edge / d e (e = x[i+1] - x[i]), half of it per node, sign by node
+    #   = -ct [gt t t^T + dgt vn t n^T + gt n n^T] - cn [gn n t^T - dgn vt n n^T - gn t n^T]
+    hx = 0.5 * cx
+    d00 = -hx * (
+        ct * (gt * tx * tx + dgt * vn * tx * nx + gt * nx * nx)
+        + cn * (gn * nx * tx - dgn * vt * nx * nx - gn * tx * nx)
+    )
+    d01 = -hx * (
+        ct * (gt * tx * ty + dgt * vn * tx * ny + gt * nx * ny)
+        + cn * (gn * nx * ty - dgn * vt * nx * ny - gn * tx * ny)
+    )
+    d10 = -hx * (
+        ct * (gt * ty * tx + dgt * vn * ty * nx + gt * ny * nx)
+        + cn * (gn * ny * tx - dgn * vt * ny * nx - gn * ty * nx)
+    )
+    d11 = -hx * (
+        ct * (gt * ty * ty + dgt * vn * ty * ny + gt * ny * ny)
+        + cn * (gn * ny * ty - dgn * vt * ny * ny - gn * ty * ny)
+    )
+    return c00, c01, c11, d00, d01, d10, d11
+
+
 @njit(cache=True, error_model="numpy")
 def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
     """Add internal (elastic, damping) and, if ``water``, drag forces into F (2N,) [N].
@@ -251,31 +287,8 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
         F[2 * i + 2] += 0.5 * fx
         F[2 * i + 3] += 0.5 * fy
         if jac:
-            dgt = 1.0 + 2.0 * abs(vt)
-            dgn = 1.0 + 2.0 * abs(vn)
-            # d F_edge / d v_edge, a quarter of it on each of the four node blocks
-            qv = 0.25 * cv
-            c00 = -qv * l * (ct * dgt * tx * tx + cn * dgn * nx * nx)
-            c01 = -qv * l * (ct * dgt * tx * ty + cn * dgn * nx * ny)
-            c11 = -qv * l * (ct * dgt * ty * ty + cn * dgn * ny * ny)
-            # d F_edge / d e (e = x[i+1] - x[i]), half of it per node, sign by node
-            #   = -ct [gt t t^T + dgt vn t n^T + gt n n^T] - cn [gn n t^T - dgn vt n n^T - gn t n^T]
-            hx = 0.5 * cx
-            d00 = -hx * (
-                ct * (gt * tx * tx + dgt * vn * tx * nx + gt * nx * nx)
-                + cn * (gn * nx * tx - dgn * vt * nx * nx - gn * tx * nx)
-            )
-            d01 = -hx * (
-                ct * (gt * tx * ty + dgt * vn * tx * ny + gt * nx * ny)
-                + cn * (gn * nx * ty - dgn * vt * nx * ny - gn * tx * ny)
-            )
-            d10 = -hx * (
-                ct * (gt * ty * tx + dgt * vn * ty * nx + gt * ny * nx)
-                + cn * (gn * ny * tx - dgn * vt * ny * nx - gn * ty * nx)
-            )
-            d11 = -hx * (
-                ct * (gt * ty * ty + dgt * vn * ty * ny + gt * ny * ny)
-                + cn * (gn * ny * ty - dgn * vt * ny * ny - gn * ty * ny)
+            c00, c01, c11, d00, d01, d10, d11 = drag_jacobian(
+                ct, cn, l, tx, ty, nx, ny, vt, vn, gt, gn, cx, cv
             )
             for a in (i, i + 1):
                 add_block(J, a, i, c00 - d00, c01 - d01, c01 - d10, c11 - d11)
@@ -362,29 +375,41 @@ def fluid_momentum(geo, v, prm, R, sp, sg, J, dt, jac):
         R[2 * i + 2] += pn * nx + gx
         R[2 * i + 3] += pn * ny + gy
         if jac:
-            a = 0.25 * cm * l
-            # D = d(edge momentum)/de; block (a, b) gets A + dt/2 (s_b D - s_a D^T) - dt^2 s_a s_b H
-            d00 = cm * (-vt * nx * nx + vn * (nx * tx - tx * nx))
-            d01 = cm * (-vt * nx * ny + vn * (nx * ty - tx * ny))
-            d10 = cm * (-vt * ny * nx + vn * (ny * tx - ty * nx))
-            d11 = cm * (-vt * ny * ny + vn * (ny * ty - ty * ny))
-            hc = dt * dt * cm / l * (vt * vt - 0.5 * vn * vn)
-            hd = 0.5 * dt
+            parts = momentum_jacobian(cm, l, tx, ty, nx, ny, vt, vn, dt)
             for ia in range(2):
-                sa = 2.0 * ia - 1.0
                 for ib in range(2):
-                    sb = 2.0 * ib - 1.0
-                    h = hc * sa * sb
-                    add_block(
-                        J,
-                        i + ia,
-                        i + ib,
-                        a * nx * nx + hd * (sb * d00 - sa * d00) - h * nx * nx,
-                        a * nx * ny + hd * (sb * d01 - sa * d10) - h * nx * ny,
-                        a * ny * nx + hd * (sb * d10 - sa * d01) - h * ny * nx,
-                        a * ny * ny + hd * (sb * d11 - sa * d11) - h * ny * ny,
-                    )
+                    m00, m01, m10, m11 = momentum_block(2.0 * ia - 1.0, 2.0 * ib - 1.0, nx, ny, parts)
+                    add_block(J, i + ia, i + ib, m00, m01, m10, m11)
     return tf
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def momentum_jacobian(cm, l, tx, ty, nx, ny, vt, vn, dt):
+    """One edge's parts of :func:`fluid_momentum`'s Jacobian: (A, dt/2, dt^2 H's factor, D).
+
+    ``D = d(edge momentum)/de``; node block (a, b) gets ``A + dt/2 (s_b D - s_a D^T) - dt^2 s_a
+    s_b H`` (:func:`momentum_block`).
+    """
+    a = 0.25 * cm * l
+    d00 = cm * (-vt * nx * nx + vn * (nx * tx - tx * nx))
+    d01 = cm * (-vt * nx * ny + vn * (nx * ty - tx * ny))
+    d10 = cm * (-vt * ny * nx + vn * (ny * tx - ty * nx))
+    d11 = cm * (-vt * ny * ny + vn * (ny * ty - ty * ny))
+    hc = dt * dt * cm / l * (vt * vt - 0.5 * vn * vn)
+    return a, 0.5 * dt, hc, d00, d01, d10, d11
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def momentum_block(sa, sb, nx, ny, parts):
+    """The 2x2 block of nodes (a, b) of one edge (signs ``sa``, ``sb``: -1 or 1) from :func:`momentum_jacobian`."""
+    a, hd, hc, d00, d01, d10, d11 = parts
+    h = hc * sa * sb
+    return (
+        a * nx * nx + hd * (sb * d00 - sa * d00) - h * nx * nx,
+        a * nx * ny + hd * (sb * d01 - sa * d10) - h * nx * ny,
+        a * ny * nx + hd * (sb * d10 - sa * d01) - h * ny * nx,
+        a * ny * ny + hd * (sb * d11 - sa * d11) - h * ny * ny,
+    )
 
 
 @njit(cache=True, error_model="numpy")

@@ -37,6 +37,7 @@ from numba import njit
 from soft_snake_gym.physics import banded, forces, geometry, layout, stepper
 from soft_snake_gym.physics.banded import KL, KU, PIVOT_THRESHOLD, WIDTH
 from soft_snake_gym.physics.cache import drop_stale_cache
+from soft_snake_gym.physics.geometry import _turning_of
 from soft_snake_gym.physics.layout import (
     ADDED_MASS_CONSISTENT,
     B_A,
@@ -138,28 +139,29 @@ def _bending_blocks(J, r, j, al, be, g0x, g0y, g1x, g1y, g2x, g2y, ha00, ha01, h
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _momentum_block(J, r, a, b, sa, sb, am, hd, hc, nx, ny, d00, d01, d10, d11):
-    """``fluid_momentum``'s block (a, b) of one edge for lane r (its loop body; sa, sb: -1 or 1)."""
-    h = hc * sa * sb
-    _add_block(
-        J,
-        r,
-        a,
-        b,
-        am * nx * nx + hd * (sb * d00 - sa * d00) - h * nx * nx,
-        am * nx * ny + hd * (sb * d01 - sa * d10) - h * nx * ny,
-        am * ny * nx + hd * (sb * d10 - sa * d01) - h * ny * nx,
-        am * ny * ny + hd * (sb * d11 - sa * d11) - h * ny * ny,
-    )
+def _momentum_block(J, r, a, b, sa, sb, nx, ny, parts):
+    """``fluid_momentum``'s block (a, b) of one edge for lane r (sa, sb: -1 or 1)."""
+    m00, m01, m10, m11 = forces.momentum_block(sa, sb, nx, ny, parts)
+    _add_block(J, r, a, b, m00, m01, m10, m11)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _edge(q, v, i, r):
-    """Edge i of lane r: ``edge_frame``'s (l, tx, ty, nx, ny, vx, vy, vt, vn), the same arithmetic."""
-    ex = q[_ix(2 * i + 2, r)] - q[_ix(2 * i, r)]
-    ey = q[_ix(2 * i + 3, r)] - q[_ix(2 * i + 1, r)]
-    l = math.sqrt(ex * ex + ey * ey)
-    tx, ty = ex / l, ey / l
+def _edge_geometry(q, E, n2):
+    """``geometry.edge_geometry`` for every lane: edge k's length and unit tangent at ``E`` rows 3k .. 3k+2."""
+    for k in range(n2 // 2 - 1):
+        for r in range(LANES):
+            ex = q[_ix(2 * k + 2, r)] - q[_ix(2 * k, r)]
+            ey = q[_ix(2 * k + 3, r)] - q[_ix(2 * k + 1, r)]
+            l = math.sqrt(ex * ex + ey * ey)
+            E[_ix(3 * k, r)] = l
+            E[_ix(3 * k + 1, r)] = ex / l
+            E[_ix(3 * k + 2, r)] = ey / l
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _edge(E, v, i, r):
+    """``geometry.edge_frame_at`` for edge i of lane r: (l, tx, ty, nx, ny, vx, vy, vt, vn)."""
+    l, tx, ty = E[_ix(3 * i, r)], E[_ix(3 * i + 1, r)], E[_ix(3 * i + 2, r)]
     nx, ny = -ty, tx
     vx = 0.5 * (v[_ix(2 * i, r)] + v[_ix(2 * i + 2, r)])
     vy = 0.5 * (v[_ix(2 * i + 1, r)] + v[_ix(2 * i + 3, r)])
@@ -167,19 +169,12 @@ def _edge(q, v, i, r):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _turning(q, j, r):
-    """``geometry.turning`` at node j of lane r, the same arithmetic."""
-    ax = q[_ix(2 * j, r)] - q[_ix(2 * j - 2, r)]
-    ay = q[_ix(2 * j + 1, r)] - q[_ix(2 * j - 1, r)]
-    bx = q[_ix(2 * j + 2, r)] - q[_ix(2 * j, r)]
-    by = q[_ix(2 * j + 3, r)] - q[_ix(2 * j + 1, r)]
-    la = math.sqrt(ax * ax + ay * ay)
-    lb = math.sqrt(bx * bx + by * by)
-    tax, tay, tbx, tby = ax / la, ay / la, bx / lb, by / lb
-    kap = 2.0 * (tax * tby - tay * tbx) / (1.0 + (tax * tbx + tay * tby))
-    g0x, g0y = -tay / la, tax / la
-    g2x, g2y = -tby / lb, tbx / lb
-    return kap, g0x, g0y, -g0x - g2x, -g0y - g2y, g2x, g2y, tax, tay, tbx, tby, la, lb
+def _turning(E, j, r):
+    """``geometry.turning_at`` at node j of lane r: ``_turning_of`` the node's two edges."""
+    a, b = 3 * (j - 1), 3 * j
+    return _turning_of(
+        E[_ix(a, r)], E[_ix(a + 1, r)], E[_ix(a + 2, r)], E[_ix(b, r)], E[_ix(b + 1, r)], E[_ix(b + 2, r)]
+    )
 
 
 @njit(cache=True, error_model="numpy")
@@ -207,6 +202,7 @@ def residual(x, p, dt, jac, res):
 def _residual(x, p, dt, jac, res):
     """The body of :func:`residual`: ``_be_residual``'s operations in its order, lane by lane."""
     q, v, q0, v0, fext, m, p0, kbar, lbar, F, R, A, J = x[:13]
+    E = x[15]
     n2 = q.size // LANES
     cx, cv = -dt * dt, -dt
     for i in range(n2):
@@ -214,14 +210,12 @@ def _residual(x, p, dt, jac, res):
             q[_ix(i, r)] = q0[_ix(i, r)] + dt * v[_ix(i, r)]
             F[_ix(i, r)] = fext[_ix(i, r)]
             A[_ix(i, r)] = v[_ix(i, r)] - v0[_ix(i, r)]
+    _edge_geometry(q, E, n2)  # as assemble: each edge's square root and divisions once per state
     if jac:
         J[:] = 0.0
     for k in range(n2 // 2 - 1):  # stretching
         for r in range(LANES):
-            ex = q[_ix(2 * k + 2, r)] - q[_ix(2 * k, r)]
-            ey = q[_ix(2 * k + 3, r)] - q[_ix(2 * k + 1, r)]
-            l = math.sqrt(ex * ex + ey * ey)
-            tx, ty = ex / l, ey / l
+            l, tx, ty = E[_ix(3 * k, r)], E[_ix(3 * k + 1, r)], E[_ix(3 * k + 2, r)]
             lb, EA, d = lbar[_ix(k, r)], p[L_EA, r], p[L_D, r]
             f = -EA * (l / lb - 1.0)
             dvx, dvy = v[_ix(2 * k + 2, r)] - v[_ix(2 * k, r)], v[_ix(2 * k + 3, r)] - v[_ix(2 * k + 1, r)]
@@ -248,7 +242,7 @@ def _residual(x, p, dt, jac, res):
                 _add_block(J, r, k + 1, k + 1, -t00, -t01, -t10, -t11)
     for j in range(1, n2 // 2 - 1):  # bending
         for r in range(LANES):
-            kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = _turning(q, j, r)
+            kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = _turning(E, j, r)
             kb = p[L_EI, r] / (0.5 * (lbar[_ix(j - 1, r)] + lbar[_ix(j, r)]))
             dk = kap - kbar[_ix(j - 1, r)]
             w = 1.0 + 0.25 * kap * kap
@@ -291,7 +285,7 @@ def _residual(x, p, dt, jac, res):
         res[L_PFLUID, r] = 0.0
     for i in range(n2 // 2 - 1):  # drag
         for r in range(LANES):
-            l, tx, ty, nx, ny, vx, vy, vt, vn = _edge(q, v, i, r)
+            l, tx, ty, nx, ny, vx, vy, vt, vn = _edge(E, v, i, r)
             ct, cn = p[L_CT, r], p[L_CN, r]
             gt = vt + vt * abs(vt)
             gn = vn + vn * abs(vn)
@@ -303,28 +297,8 @@ def _residual(x, p, dt, jac, res):
             F[_ix(2 * i + 2, r)] += 0.5 * fx
             F[_ix(2 * i + 3, r)] += 0.5 * fy
             if jac:
-                dgt = 1.0 + 2.0 * abs(vt)
-                dgn = 1.0 + 2.0 * abs(vn)
-                qv = 0.25 * cv
-                c00 = -qv * l * (ct * dgt * tx * tx + cn * dgn * nx * nx)
-                c01 = -qv * l * (ct * dgt * tx * ty + cn * dgn * nx * ny)
-                c11 = -qv * l * (ct * dgt * ty * ty + cn * dgn * ny * ny)
-                hx = 0.5 * cx
-                d00 = -hx * (
-                    ct * (gt * tx * tx + dgt * vn * tx * nx + gt * nx * nx)
-                    + cn * (gn * nx * tx - dgn * vt * nx * nx - gn * tx * nx)
-                )
-                d01 = -hx * (
-                    ct * (gt * tx * ty + dgt * vn * tx * ny + gt * nx * ny)
-                    + cn * (gn * nx * ty - dgn * vt * nx * ny - gn * tx * ny)
-                )
-                d10 = -hx * (
-                    ct * (gt * ty * tx + dgt * vn * ty * nx + gt * ny * nx)
-                    + cn * (gn * ny * tx - dgn * vt * ny * nx - gn * ty * nx)
-                )
-                d11 = -hx * (
-                    ct * (gt * ty * ty + dgt * vn * ty * ny + gt * ny * ny)
-                    + cn * (gn * ny * ty - dgn * vt * ny * ny - gn * ty * ny)
+                c00, c01, c11, d00, d01, d10, d11 = forces.drag_jacobian(
+                    ct, cn, l, tx, ty, nx, ny, vt, vn, gt, gn, cx, cv
                 )
                 _add_block(J, r, i, i, c00 - d00, c01 - d01, c01 - d10, c11 - d11)
                 _add_block(J, r, i, i + 1, c00 + d00, c01 + d01, c01 + d10, c11 + d11)
@@ -339,7 +313,7 @@ def _residual(x, p, dt, jac, res):
                 J[_jx(i, KL, r)] += m[_ix(i, r)]
     for i in range(n2 // 2 - 1):  # the water's momentum: fluid_momentum(sp = 1, sg = -dt)
         for r in range(LANES):
-            l, tx, ty, nx, ny, vx, vy, vt, vn = _edge(q, v, i, r)
+            l, tx, ty, nx, ny, vx, vy, vt, vn = _edge(E, v, i, r)
             cm = p[L_CM, r]
             sp, sg = 1.0, -dt
             pn = 0.5 * sp * cm * l * vn
@@ -351,17 +325,11 @@ def _residual(x, p, dt, jac, res):
             R[_ix(2 * i + 2, r)] += pn * nx + gx
             R[_ix(2 * i + 3, r)] += pn * ny + gy
             if jac:
-                am = 0.25 * cm * l
-                d00 = cm * (-vt * nx * nx + vn * (nx * tx - tx * nx))
-                d01 = cm * (-vt * nx * ny + vn * (nx * ty - tx * ny))
-                d10 = cm * (-vt * ny * nx + vn * (ny * tx - ty * nx))
-                d11 = cm * (-vt * ny * ny + vn * (ny * ty - ty * ny))
-                hc = dt * dt * cm / l * (vt * vt - 0.5 * vn * vn)
-                hd = 0.5 * dt
-                _momentum_block(J, r, i, i, -1.0, -1.0, am, hd, hc, nx, ny, d00, d01, d10, d11)
-                _momentum_block(J, r, i, i + 1, -1.0, 1.0, am, hd, hc, nx, ny, d00, d01, d10, d11)
-                _momentum_block(J, r, i + 1, i, 1.0, -1.0, am, hd, hc, nx, ny, d00, d01, d10, d11)
-                _momentum_block(J, r, i + 1, i + 1, 1.0, 1.0, am, hd, hc, nx, ny, d00, d01, d10, d11)
+                parts = forces.momentum_jacobian(cm, l, tx, ty, nx, ny, vt, vn, dt)
+                _momentum_block(J, r, i, i, -1.0, -1.0, nx, ny, parts)
+                _momentum_block(J, r, i, i + 1, -1.0, 1.0, nx, ny, parts)
+                _momentum_block(J, r, i + 1, i, 1.0, -1.0, nx, ny, parts)
+                _momentum_block(J, r, i + 1, i + 1, 1.0, 1.0, nx, ny, parts)
     for r in range(LANES):
         res[L_NORM2, r] = 0.0
         res[L_RMAX, r] = 0.0
@@ -446,12 +414,13 @@ def solve(J, b, n):
 def allocate(n2):
     """A block's flat arrays for robots of ``n2 = 2N`` unknowns (see :func:`gather`).
 
-    q, v, q0, v0, fext, m, p0, kbar, lbar, F, R, A, J, then Newton's vacc and dv.
+    q, v, q0, v0, fext, m, p0, kbar, lbar, F, R, A, J, Newton's vacc and dv, then the edges'
+    lengths and unit tangents (three rows an edge).
     """
     n, N = n2 * LANES, n2 // 2
     z = np.zeros
     return (z(n), z(n), z(n), z(n), z(n), z(n), z(n), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z(n),
-            z(n2 * WIDTH * LANES), z(n), z(n))  # fmt: skip
+            z(n2 * WIDTH * LANES), z(n), z(n), z(3 * (N - 1) * LANES))  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
