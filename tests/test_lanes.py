@@ -208,7 +208,7 @@ def test_the_vector_env_steps_blocks_and_leftovers_as_single_envs_with_two_threa
             task.act[:] = a
             active = status == L.OK
             if blocks:
-                T.batch_step(active, tuple(sim), tuple(task), status)
+                T.batch_step(active, tuple(sim), tuple(task), status, 2)
             else:
                 _robot_by_robot(active, tuple(sim), tuple(task), status)
         s = L.sim_arrays_over(sim.f.copy(), sim.ibuf)  # all but Newton's scratch (band, trial, step)

@@ -548,24 +548,30 @@ def _robot(s, t, i):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def batch_step(active, s, t, status):
-    """:func:`robot_step` for every active robot, spread over numba's threads.
+def batch_step(active, s, t, status, threads):
+    """:func:`robot_step` for every active robot, spread over ``threads`` of numba's threads.
 
     For every robot ``i`` with ``active[i]``, of stacked simulator arrays ``s`` and task arrays
     ``t`` (leading robot axis); robot ``i``'s status into ``status[i]``. The robots go in blocks
-    of ``lanes.LANES`` (:func:`block_step`), the rest one by one.
+    of ``lanes.LANES`` (:func:`block_step`), the rest one by one; each thread takes one run of
+    them (as ``prange`` would) and works in its own :func:`_block_scratch`.
     """
     s, t = SimArrays(*s), TaskArrays(*t)
-    for u in prange(_units(status.size)):
-        _step_unit(active, s, t, status, u)
+    units = _units(status.size)
+    parts = max(1, min(threads, units))
+    for c in prange(parts):
+        scratch = _block_scratch(s.q.shape[1])
+        for u in range(c * units // parts, (c + 1) * units // parts):
+            _step_unit(active, s, t, status, u, scratch)
 
 
 @njit(cache=True, error_model="numpy")
 def batch_step_serial(active, s, t, status):
     """:func:`batch_step` on the calling thread alone (no thread-pool launch: for one thread)."""
     s, t = SimArrays(*s), TaskArrays(*t)
+    scratch = _block_scratch(s.q.shape[1])
     for u in range(_units(status.size)):
-        _step_unit(active, s, t, status, u)
+        _step_unit(active, s, t, status, u, scratch)
 
 
 @njit(cache=True, inline="always")
@@ -575,11 +581,26 @@ def _units(n):
 
 
 @njit(cache=True, error_model="numpy")
-def _step_unit(active, s, t, status, u):
+def _block_scratch(n2):
+    """The arrays :func:`block_step` works in, for robots of ``n2 = 2N`` unknowns: one set per thread.
+
+    The block's flat arrays (``lanes.allocate``), its parameters, Newton's results, and per lane:
+    the squared action, the energies before the step, the status, the iterations and sums of a
+    sub-step, ``simulate``'s sums over the sub-steps, and the stage's and the sub-step's flags.
+    """
+    n = lanes.LANES
+    z = np.zeros
+    return (lanes.allocate(n2), z((lanes.N_LANE_PRM, n)), z((5, n)), z(n), z((3, n)), z(n, dtype=np.int64),
+            z(n, dtype=np.int64), z((5, n)), z(n, dtype=np.int64), z(n), z((4, n)), z(n, dtype=np.bool_),
+            z(n, dtype=np.bool_))  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def _step_unit(active, s, t, status, u, scratch):
     """Unit ``u`` of :func:`_units`: a block (:func:`_step_block`) or one robot past the last block."""
     blocks = status.size // lanes.LANES
     if u < blocks:
-        _step_block(active, s, t, status, u * lanes.LANES)
+        _step_block(active, s, t, status, u * lanes.LANES, scratch)
         return
     i = blocks * lanes.LANES + (u - blocks)
     if active[i]:
@@ -588,7 +609,7 @@ def _step_unit(active, s, t, status, u):
 
 
 @njit(cache=True, error_model="numpy")
-def _step_block(active, s, t, status, first):
+def _step_block(active, s, t, status, first, scratch):
     """Robots ``first`` .. ``first + LANES - 1``: by :func:`block_step` if it takes them all, else one by one."""
     together = True
     for r in range(lanes.LANES):
@@ -598,7 +619,7 @@ def _step_block(active, s, t, status, first):
             s.prm[i, L.P_H] == s.prm[first, L.P_H] and s.prm[i, L.P_SUBSTEPS] == s.prm[first, L.P_SUBSTEPS]
         )
     if together:
-        block_step(s, t, first, status)
+        block_step(s, t, first, status, scratch)
         return
     for r in range(lanes.LANES):
         i = first + r
@@ -614,29 +635,21 @@ def block_eligible(prm, tp):
 
 
 @njit(cache=True, error_model="numpy")
-def block_step(s, t, first, status):
+def block_step(s, t, first, status, scratch):
     """:func:`robot_step` for the ``LANES`` robots from ``first``, each stage's Newton solve for all at once.
 
-    Every robot must be :func:`block_eligible`, with the same ``h`` and sub-steps. It is
-    :func:`robot_step` with ``stepper.simulate``'s step of SDIRK2 sub-steps written out around
-    ``lanes.newton``: each robot's task start, each stage's start and end, the step's end and
-    the task's end are the same functions, and the sums over sub-steps are ``simulate``'s, so
-    every robot ends bit for bit as :func:`robot_step` leaves it.
+    Every robot must be :func:`block_eligible`, with the same ``h`` and sub-steps; ``scratch`` is
+    :func:`_block_scratch`'s. It is :func:`robot_step` with ``stepper.simulate``'s step of SDIRK2
+    sub-steps written out around ``lanes.newton``: each robot's task start, each stage's start
+    and end, the step's end and the task's end are the same functions, and the sums over
+    sub-steps are ``simulate``'s, so every robot ends bit for bit as :func:`robot_step` leaves it.
     """
     n_lanes = lanes.LANES
-    x = lanes.allocate(s.q.shape[1])
-    p = np.empty((lanes.N_LANE_PRM, n_lanes))
-    result = np.empty((5, n_lanes))
-    sq = np.empty(n_lanes)
-    before = np.empty((3, n_lanes))
-    state = np.full(n_lanes, L.OK)  # each robot's status in the step
-    iters = np.zeros(n_lanes, dtype=np.int64)
-    acc = np.zeros((5, n_lanes))  # a sub-step's residual, fluid, damping and friction energy, actuator work
-    niter = np.zeros(n_lanes, dtype=np.int64)  # simulate's sums over the sub-steps
-    resid = np.zeros(n_lanes)
-    energy = np.zeros((4, n_lanes))
-    go = np.zeros(n_lanes, dtype=np.bool_)
-    ran = np.zeros(n_lanes, dtype=np.bool_)
+    x, p, result, sq, before, state, iters, acc, niter, resid, energy, go, ran = scratch
+    state[:] = L.OK  # each robot's status in the step
+    niter[:] = 0  # simulate's sums over the sub-steps
+    resid[:] = 0.0
+    energy[:] = 0.0
     for r in range(n_lanes):
         si, ti = _robot(s, t, first + r)
         sq[r] = step_begin(si, ti)
@@ -653,27 +666,29 @@ def block_step(s, t, first, status):
         for r in range(n_lanes):
             ran[r] = state[r] == L.OK
             iters[r] = 0
-            acc[:, r] = 0.0
+            acc[:, r] = 0.0  # a sub-step's residual, fluid, damping and friction energy, actuator work
         if not ran.any():
             break
         for stage in range(2):  # stepper._sdirk2_substep
             for r in range(n_lanes):
                 go[r] = False
                 if state[r] == L.OK:
-                    si, ti = _robot(s, t, first + r)
-                    state[r] = stepper.sdirk2_stage_start(si, stage, dt, L.MEDIUM_WATER, ti.uk, ti.ul)
+                    i = first + r
+                    si = L.sim_views(s.f[i], s.ibuf[i])  # the task's views are not needed here
+                    state[r] = stepper.sdirk2_stage_start(si, stage, dt, L.MEDIUM_WATER, t.uk[i], t.ul[i])
                     go[r] = state[r] == L.OK
             if not go.any():
                 break
             lanes.newton(s, first, go, x, p, stepper.GAMMA * dt, result)
             for r in range(n_lanes):
                 if go[r]:
-                    si, ti = _robot(s, t, first + r)
+                    i = first + r
+                    si = L.sim_views(s.f[i], s.ibuf[i])
                     damped = si.prm[L.P_DBEND] > 0.0 or si.prm[L.P_DSTRETCH] > 0.0
                     newton = (int(result[0, r]), int(result[1, r]), result[2, r], result[3, r], result[4, r])
                     sums = (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r])
                     state[r], (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r]) = (
-                        stepper.sdirk2_stage_end(si, stage, dt, ti.uk, damped, newton, sums)
+                        stepper.sdirk2_stage_end(si, stage, dt, t.uk[i], damped, newton, sums)
                     )
         for r in range(n_lanes):  # simulate's sums of the sub-step
             if ran[r]:

@@ -396,7 +396,7 @@ class SoftVectorEnv(VectorEnv):
             T.batch_step_serial(stepping, tuple(self.batch.sim), tuple(self.batch.task), status)
         else:
             numba.set_num_threads(self.num_threads)
-            T.batch_step(stepping, tuple(self.batch.sim), tuple(self.batch.task), status)
+            T.batch_step(stepping, tuple(self.batch.sim), tuple(self.batch.task), status, self.num_threads)
         self.kernel_seconds += time.perf_counter() - start
         rs = self.batch.task.rs
         terminated, truncated, failed = _finish_step(

@@ -69,8 +69,9 @@ def elastic_energy(q, kbar, lbar, prm):
     EA, EI = prm[P_EA], prm[P_EI]
     e = 0.0
     for k in range(N - 1):
-        l = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1])
-        s = l / lbar[k] - 1.0
+        ex = q[2 * k + 2] - q[2 * k]
+        ey = q[2 * k + 3] - q[2 * k + 1]
+        s = math.sqrt(ex * ex + ey * ey) / lbar[k] - 1.0  # a square root, not libm's slower hypot
         e += 0.5 * EA * s * s * lbar[k]
     for j in range(1, N - 1):
         dk = turning(q, j)[0] - kbar[j - 1]
@@ -495,7 +496,7 @@ def actuator_power(q, kbar, lbar, u_k, u_l, prm, geo):
         p -= EI / lv * dk * u_k[j - 1]
         p -= 0.25 * EI * dk * dk / (lv * lv) * (u_l[j - 1] + u_l[j])
     for k in range(N - 1):
-        r = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1]) / lbar[k]
+        r = geo[0, k] / lbar[k]
         p -= 0.5 * EA * (r * r - 1.0) * u_l[k]
     return p
 

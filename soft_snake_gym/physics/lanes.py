@@ -415,12 +415,15 @@ def allocate(n2):
     """A block's flat arrays for robots of ``n2 = 2N`` unknowns (see :func:`gather`).
 
     q, v, q0, v0, fext, m, p0, kbar, lbar, F, R, A, J, Newton's vacc and dv, then the edges'
-    lengths and unit tangents (three rows an edge).
+    lengths and unit tangents (three rows an edge), then :func:`newton`'s per-lane work: two
+    rows of residual figures, the lanes whose factors kept their rows, the lanes on the common
+    path and how each ended. Allocated once per thread and reused for every block it steps.
     """
     n, N = n2 * LANES, n2 // 2
     z = np.zeros
     return (z(n), z(n), z(n), z(n), z(n), z(n), z(n), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z(n),
-            z(n2 * WIDTH * LANES), z(n), z(n), z(3 * (N - 1) * LANES))  # fmt: skip
+            z(n2 * WIDTH * LANES), z(n), z(n), z(3 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
+            z((N_LANE_RES, LANES)), z(LANES, dtype=np.bool_), z(LANES, dtype=np.bool_), z(LANES, dtype=np.int64))  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
@@ -484,12 +487,10 @@ def newton(s, first, go, x, p, dt, result):
     Returns how many lanes the block solved (the rest went to ``_be_newton``).
     """
     q, v, F, R, A, J = x[0], x[1], x[9], x[10], x[11], x[12]
+    res, res1, kept, on, done = x[16:21]
     n2 = s.q.shape[1]
-    res = np.empty((N_LANE_RES, LANES))
-    res1 = np.empty((N_LANE_RES, LANES))
-    kept = np.empty(LANES, dtype=np.bool_)
-    on = np.zeros(LANES, dtype=np.bool_)  # lanes on the common path
-    done = np.zeros(LANES, dtype=np.int64)  # 0: going on; else 1 + the iterations it converged in
+    on[:] = False  # lanes on the common path
+    done[:] = 0  # 0: going on; else 1 + the iterations it converged in
     gather(s, first, x, p)
     residual(x, p, dt, True, res)
     for r in range(LANES):

@@ -126,8 +126,9 @@ def check_state(q, v, lbar, prm, buf, ibuf):
             return NON_FINITE
     max_strain = prm[P_MAXSTRAIN]
     for k in range(n // 2 - 1):
-        l = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1])
-        if abs(l / lbar[k] - 1.0) > max_strain:
+        ex = q[2 * k + 2] - q[2 * k]
+        ey = q[2 * k + 3] - q[2 * k + 1]
+        if abs(math.sqrt(ex * ex + ey * ey) / lbar[k] - 1.0) > max_strain:  # not hypot: 4x slower
             return RUNAWAY_STRETCH
     if prm[P_CHECKSI] != 0.0 and self_intersects(q, buf[B_KEYS], ibuf[I_ORDER]):
         return SELF_INTERSECTION
