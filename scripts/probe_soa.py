@@ -389,8 +389,8 @@ def per_robot_residual(s, dt, jac, res, reps):
 
 
 @njit(cache=True, error_model="numpy")
-def block_residuals(s, dt, jac, res, R, J, reps):
-    """The same by ``lanes.residual``, block by block, each gathered from the robots' arrays first.
+def block_residuals(s, uk, dt, jac, res, R, J, reps):
+    """The same by ``lanes.residual``, block by block, each taken from the robots' arrays first.
 
     Writes the results per robot into ``res`` (3, robots), ``R`` (robots, 2N), ``J`` (robots, 2N, width).
     """
@@ -401,20 +401,20 @@ def block_residuals(s, dt, jac, res, R, J, reps):
     out = np.empty((lanes.N_LANE_RES, lanes_))
     for _ in range(reps):
         for b in range(s.q.shape[0] // lanes_):
-            lanes.gather(s, b * lanes_, x, p)
+            lanes.take(s, uk, b * lanes_, x, p)
             lanes.residual(x, p, dt, jac, out)
             for r in range(lanes_):
                 i = b * lanes_ + r
                 res[0, i], res[1, i], res[2, i] = out[0, r], out[1, r], out[2, r]
     for b in range(s.q.shape[0] // lanes_):  # the last pass's R and J per robot, for the comparison
-        lanes.gather(s, b * lanes_, x, p)
+        lanes.take(s, uk, b * lanes_, x, p)
         lanes.residual(x, p, dt, jac, out)
         for r in range(lanes_):
             i = b * lanes_ + r
             for k in range(n2):
-                R[i, k] = x[10][k * lanes_ + r]
+                R[i, k] = x.R[k * lanes_ + r]
                 for c in range(J.shape[2]):
-                    J[i, k, c] = x[12][(k * J.shape[2] + c) * lanes_ + r]
+                    J[i, k, c] = x.J[(k * J.shape[2] + c) * lanes_ + r]
 
 
 @njit(cache=True, error_model="numpy")
@@ -586,7 +586,7 @@ def probe(robots: int, rounds: int) -> bool:
                 tuple(sim), dt, jac, res, k
             ),
             f"blocks of {LANES} (lanes)": lambda k, jac=jac, res=res_blk, R=R_blk, J=J_blk: block_residuals(
-                tuple(sim), dt, jac, res, R, J, k
+                tuple(sim), venv.batch.task.uk, dt, jac, res, R, J, k
             ),
         }
         for run in runs.values():

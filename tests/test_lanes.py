@@ -63,11 +63,11 @@ def _scalar_residuals(s, dt, jac, res):
 
 
 @njit
-def _block_residuals(s, dt, jac, res):
+def _block_residuals(s, uk, dt, jac, res):
     s = SimArrays(*s)
     x = lanes.allocate(s.q.shape[1])
     p = np.empty((lanes.N_LANE_PRM, LANES))
-    lanes.gather(s, 0, x, p)
+    lanes.take(s, uk, 0, x, p)
     lanes.residual(x, p, dt, jac, res)
     return x
 
@@ -81,10 +81,17 @@ def _scalar_newton(s, dt, result):
 
 
 @njit
-def _block_newton(s, go, dt, result):
+def _block_newton(s, uk, go, dt, result):
+    """The stages' start taken into a block, solved there, and the lanes that ran put back."""
     s = SimArrays(*s)
     x = lanes.allocate(s.q.shape[1])
-    return lanes.newton(s, 0, go, x, np.empty((lanes.N_LANE_PRM, LANES)), dt, result)
+    p = np.empty((lanes.N_LANE_PRM, LANES))
+    lanes.take(s, uk, 0, x, p)
+    solved = lanes.newton(s, 0, go, x, p, dt, result)
+    for r in range(LANES):
+        if go[r]:
+            lanes.put(s, r, x, r, x.v)
+    return solved
 
 
 def _flat(a: np.ndarray) -> np.ndarray:
@@ -112,8 +119,8 @@ def test_the_block_residual_is_be_residual_bit_for_bit(jac):
     ref = L.sim_arrays_over(sim.f.copy(), sim.ibuf)
     sim.f[:] = f0
     res_b = np.empty((3, LANES))
-    x = _block_residuals(tuple(sim), DT, jac, res_b)
-    q, F, R, A, J = x[0], x[9], x[10], x[11], x[12]
+    x = _block_residuals(tuple(sim), task.uk, DT, jac, res_b)
+    q, F, R, A, J = x.q, x.F, x.R, x.A, x.J
     assert np.array_equal(_bits(res_b), _bits(res))  # |R|^2, max |R|/m, drag power
     for flat, want in ((q, ref.q), (F, ref.buf[:, L.B_F]), (R, ref.buf[:, L.B_R]), (A, ref.buf[:, L.B_A])):
         assert np.array_equal(_bits(_unflat(flat, want.shape)), _bits(want))
@@ -179,7 +186,7 @@ def test_the_block_newton_leaves_every_robot_as_be_newton(stage):
     f_ref = sim.f.copy()
     sim.f[:], sim.ibuf[:] = f0, i0
     got = np.empty((5, LANES))
-    solved = _block_newton(tuple(sim), go, DT, got)
+    solved = _block_newton(tuple(sim), task.uk, go, DT, got)
     ref = L.sim_arrays_over(f_ref, i0)
     new = L.sim_arrays_over(sim.f, sim.ibuf)
     ran = go.copy()
@@ -211,14 +218,54 @@ def test_the_vector_env_steps_blocks_and_leftovers_as_single_envs_with_two_threa
                 T.batch_step(active, tuple(sim), tuple(task), status, 2)
             else:
                 _robot_by_robot(active, tuple(sim), tuple(task), status)
-        s = L.sim_arrays_over(sim.f.copy(), sim.ibuf)  # all but Newton's scratch (band, trial, step)
-        kept_rows = [k for k in range(L.N_BUF) if k not in (L.B_VACC, L.B_DV)]
-        state = [s.q, s.v, s.kbar, s.lbar, s.prm, s.out, s.buf[:, kept_rows], task.f, task.obs]
-        runs.append(([np.array(a) for a in state], status.copy()))
+        runs.append((_state(sim, task), status.copy()))
     (a, status_a), (b, status_b) = runs
     assert all(np.array_equal(_bits(x), _bits(y)) for x, y in zip(a, b, strict=True))
     assert np.array_equal(status_a, status_b)
     assert (status_a == L.OK).sum() > n // 2 and (status_a != L.OK).any()  # most swim, some fail
+
+
+def test_robots_that_fail_inside_a_block_step_end_as_robot_step_leaves_them():
+    """A block with lanes whose stage solves fail or leave the common path, over two sub-steps.
+
+    Lane 7 starts with a NaN velocity (its first stage fails), lane 9 may take one Newton
+    iteration (it fails where one is not enough), lane 11 renews its Jacobian: ``_be_newton``
+    solves them on their robots' arrays, the block takes them back, and puts a failed lane back
+    at once. Every robot's state and status against ``robot_step``.
+    """
+    rng = np.random.default_rng(8)
+    actions = rng.uniform(-1, 1, (4, LANES, 8))
+    runs = []
+    for blocks in (True, False):
+        venv = _eels(seed=6)
+        sim, task = venv.batch.sim, venv.batch.task
+        sim.prm[:, L.P_SUBSTEPS] = 2
+        sim.prm[9, L.P_MAXIT] = 1
+        sim.prm[11, L.P_CHORD] = 0.0
+        sim.v[7, 4] = np.nan
+        status = np.zeros(LANES, dtype=np.int64)
+        for a in actions:
+            task.act[:] = a
+            active = status == L.OK
+            if blocks:
+                T.batch_step(active, tuple(sim), tuple(task), status, 1)
+            else:
+                _robot_by_robot(active, tuple(sim), tuple(task), status)
+        runs.append((_state(sim, task), status.copy()))
+    (a, status_a), (b, status_b) = runs
+    assert all(np.array_equal(_bits(x), _bits(y)) for x, y in zip(a, b, strict=True))
+    assert np.array_equal(status_a, status_b)
+    assert status_a[7] == L.NON_FINITE and status_a[9] == L.NOT_CONVERGED  # they failed in a stage
+    assert (status_a == L.OK).sum() == LANES - 2
+
+
+def _state(sim, task) -> list[np.ndarray]:
+    """Copies of a batch's arrays, all but Newton's scratch (band, trial, step)."""
+    s = L.sim_arrays_over(sim.f.copy(), sim.ibuf)
+    kept_rows = [k for k in range(L.N_BUF) if k not in (L.B_VACC, L.B_DV)]
+    return [
+        np.array(a) for a in (s.q, s.v, s.kbar, s.lbar, s.prm, s.out, s.buf[:, kept_rows], task.f, task.obs)
+    ]
 
 
 @njit

@@ -630,19 +630,30 @@ def _step_block(active, s, t, status, first, scratch):
 
 @njit(cache=True, error_model="numpy")
 def block_eligible(prm, tp):
-    """True if :func:`block_step` takes the robot: SDIRK2 in water, one step of ``h`` per control step."""
-    return lanes.eligible(prm) and int(prm[L.P_METHOD]) == L.METHOD_SDIRK2 and int(tp[T_NSUB]) == 1
+    """True if :func:`block_step` takes the robot: a swimmer on SDIRK2, one step of ``h`` per control step.
+
+    A swimmer's inputs are curvature rates (its rest lengths never move), in water with the
+    consistent added mass (``lanes.eligible``).
+    """
+    return (
+        lanes.eligible(prm)
+        and int(prm[L.P_METHOD]) == L.METHOD_SDIRK2
+        and int(tp[T_NSUB]) == 1
+        and int(tp[T_KIND]) == SWIM
+    )
 
 
 @njit(cache=True, error_model="numpy")
 def block_step(s, t, first, status, scratch):
-    """:func:`robot_step` for the ``LANES`` robots from ``first``, each stage's Newton solve for all at once.
+    """:func:`robot_step` for the ``LANES`` robots from ``first``, each SDIRK2 stage for all at once.
 
     Every robot must be :func:`block_eligible`, with the same ``h`` and sub-steps; ``scratch`` is
     :func:`_block_scratch`'s. It is :func:`robot_step` with ``stepper.simulate``'s step of SDIRK2
-    sub-steps written out around ``lanes.newton``: each robot's task start, each stage's start
-    and end, the step's end and the task's end are the same functions, and the sums over
-    sub-steps are ``simulate``'s, so every robot ends bit for bit as :func:`robot_step` leaves it.
+    sub-steps written out: each robot's task start and end and the step's end are the same
+    functions, the stages run in the block (``lanes.stage_start``, ``lanes.newton``,
+    ``lanes.stage_end``) in the scalar kernels' order of operations, and the sums are
+    ``simulate``'s, so every robot ends bit for bit as :func:`robot_step` leaves it. A robot
+    whose step fails is put back at once; the others after their last stage.
     """
     n_lanes = lanes.LANES
     x, p, result, sq, before, state, iters, acc, niter, resid, energy, go, ran = scratch
@@ -660,6 +671,7 @@ def block_step(s, t, first, status, scratch):
         if si.prm[L.P_LAG] == 0.0:  # stepper.simulate's start of a step
             si.buf[L.B_LRATE, : si.lbar.size] = ti.ul
         si.out[L.O_NJAC] = si.out[L.O_NRES] = si.out[L.O_NFACTOR] = 0.0
+    lanes.take(s, t.uk, first, x, p)
     nsub = int(s.prm[first, L.P_SUBSTEPS])
     dt = s.prm[first, L.P_H] / nsub  # as stepper.simulate
     for _ in range(nsub):
@@ -667,29 +679,26 @@ def block_step(s, t, first, status, scratch):
             ran[r] = state[r] == L.OK
             iters[r] = 0
             acc[:, r] = 0.0  # a sub-step's residual, fluid, damping and friction energy, actuator work
-        if not ran.any():
-            break
         for stage in range(2):  # stepper._sdirk2_substep
             for r in range(n_lanes):
-                go[r] = False
-                if state[r] == L.OK:
-                    i = first + r
-                    si = L.sim_views(s.f[i], s.ibuf[i])  # the task's views are not needed here
-                    state[r] = stepper.sdirk2_stage_start(si, stage, dt, L.MEDIUM_WATER, t.uk[i], t.ul[i])
-                    go[r] = state[r] == L.OK
+                go[r] = state[r] == L.OK
             if not go.any():
                 break
+            lanes.stage_start(x, p, stage, dt)
             lanes.newton(s, first, go, x, p, stepper.GAMMA * dt, result)
+            lanes.stage_end(x, p, stage)
             for r in range(n_lanes):
                 if go[r]:
-                    i = first + r
-                    si = L.sim_views(s.f[i], s.ibuf[i])
-                    damped = si.prm[L.P_DBEND] > 0.0 or si.prm[L.P_DSTRETCH] > 0.0
+                    damped = p[lanes.L_DB, r] > 0.0 or p[lanes.L_D, r] > 0.0
                     newton = (int(result[0, r]), int(result[1, r]), result[2, r], result[3, r], result[4, r])
                     sums = (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r])
                     state[r], (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r]) = (
-                        stepper.sdirk2_stage_end(si, stage, dt, t.uk[i], damped, newton, sums)
+                        stepper.sdirk2_stage_sums(
+                            stage, dt, damped, newton, x.power[0, r], x.power[1, r], sums
+                        )
                     )
+                    if state[r] != L.OK:
+                        lanes.put(s, first + r, x, r, x.v)
         for r in range(n_lanes):  # simulate's sums of the sub-step
             if ran[r]:
                 niter[r] = max(niter[r], iters[r])
@@ -701,6 +710,8 @@ def block_step(s, t, first, status, scratch):
         if state[r] == BAD_ACTION:
             status[i] = BAD_ACTION
             continue
+        if state[r] == L.OK:
+            lanes.put(s, i, x, r, x.v)
         si, ti = _robot(s, t, i)
         st = stepper.end_step(
             si, state[r], niter[r], resid[r], energy[0, r], energy[1, r], energy[2, r], energy[3, r]

@@ -30,6 +30,7 @@ tests compare bit for bit.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -43,11 +44,14 @@ from soft_snake_gym.physics.layout import (
     B_A,
     B_F,
     B_FEXT,
+    B_GEO,
+    B_LRATE,
     B_M,
     B_P0,
     B_Q0,
     B_R,
     B_V0,
+    B_VSTEP,
     MEDIUM_WATER,
     O_NFACTOR,
     O_NJAC,
@@ -81,6 +85,49 @@ N_LANE_PRM = 10
 # per-lane results of a residual, rows of (N_LANE_RES, LANES): |R|^2, max |R|/m, drag power
 L_NORM2, L_RMAX, L_PFLUID = range(3)
 N_LANE_RES = 3
+
+
+class Block(NamedTuple):
+    """A block's arrays: robot state in the flat layout (element i of lane r at ``_ix(i, r)``), and work.
+
+    :func:`take` copies the robots' state in, :func:`put` copies it back: ``q``, ``v``, the
+    stage's start ``q0``, ``v0``, the water's momentum there ``p0``, the step's start velocity
+    ``vstep``, the forces ``F``, residual ``R`` and ``A`` (``buf``'s rows of those names), the
+    rest shape ``kbar``, ``lbar``, the inputs ``uk`` and the length rates ``lrate``, and the
+    edges' lengths and unit tangents ``E`` (three rows an edge; ``buf[B_GEO]``). ``fext`` and
+    ``m`` are copied in only. The rest is work: the band ``J``, Newton's ``vacc``, ``dv`` and
+    the stage's first guess ``guess``; :func:`newton`'s per-lane residual figures ``res``,
+    ``res1``, the lanes whose factors kept their rows ``kept``, the lanes on the common path
+    ``on`` and how each ended ``done``; the stage's actuator and damping power per lane
+    ``power`` (2, LANES).
+    """
+
+    q: np.ndarray
+    v: np.ndarray
+    q0: np.ndarray
+    v0: np.ndarray
+    fext: np.ndarray
+    m: np.ndarray
+    p0: np.ndarray
+    kbar: np.ndarray
+    lbar: np.ndarray
+    F: np.ndarray
+    R: np.ndarray
+    A: np.ndarray
+    J: np.ndarray
+    vacc: np.ndarray
+    dv: np.ndarray
+    E: np.ndarray
+    res: np.ndarray
+    res1: np.ndarray
+    kept: np.ndarray
+    on: np.ndarray
+    done: np.ndarray
+    uk: np.ndarray
+    lrate: np.ndarray
+    vstep: np.ndarray
+    guess: np.ndarray
+    power: np.ndarray
 
 
 @njit(cache=True, inline="always")
@@ -177,6 +224,24 @@ def _turning(E, j, r):
     )
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _momentum_edge(E, v, R, cm, sp, sg, i, r):
+    """``forces.fluid_momentum``'s sum for edge i of lane r: adds ``sp P_f + sg G`` to R.
+
+    Returns the edge's frame for the Jacobian: (l, tx, ty, nx, ny, vt, vn).
+    """
+    l, tx, ty, nx, ny, vx, vy, vt, vn = _edge(E, v, i, r)
+    pn = 0.5 * sp * cm * l * vn
+    gt = sg * cm * 0.5 * vn * vn
+    gn = -sg * cm * vn * vt
+    gx, gy = gt * tx + gn * nx, gt * ty + gn * ny
+    R[_ix(2 * i, r)] += pn * nx - gx
+    R[_ix(2 * i + 1, r)] += pn * ny - gy
+    R[_ix(2 * i + 2, r)] += pn * nx + gx
+    R[_ix(2 * i + 3, r)] += pn * ny + gy
+    return l, tx, ty, nx, ny, vt, vn
+
+
 @njit(cache=True, error_model="numpy")
 def residual(x, p, dt, jac, res):
     """``stepper._be_residual`` in water with the consistent added mass, for every lane of a block.
@@ -201,8 +266,8 @@ def residual(x, p, dt, jac, res):
 @njit(cache=True, inline="always", error_model="numpy")
 def _residual(x, p, dt, jac, res):
     """The body of :func:`residual`: ``_be_residual``'s operations in its order, lane by lane."""
-    q, v, q0, v0, fext, m, p0, kbar, lbar, F, R, A, J = x[:13]
-    E = x[15]
+    q, v, q0, v0, fext, m, p0 = x.q, x.v, x.q0, x.v0, x.fext, x.m, x.p0
+    kbar, lbar, F, R, A, J, E = x.kbar, x.lbar, x.F, x.R, x.A, x.J, x.E
     n2 = q.size // LANES
     cx, cv = -dt * dt, -dt
     for i in range(n2):
@@ -313,17 +378,8 @@ def _residual(x, p, dt, jac, res):
                 J[_jx(i, KL, r)] += m[_ix(i, r)]
     for i in range(n2 // 2 - 1):  # the water's momentum: fluid_momentum(sp = 1, sg = -dt)
         for r in range(LANES):
-            l, tx, ty, nx, ny, vx, vy, vt, vn = _edge(E, v, i, r)
             cm = p[L_CM, r]
-            sp, sg = 1.0, -dt
-            pn = 0.5 * sp * cm * l * vn
-            gt = sg * cm * 0.5 * vn * vn
-            gn = -sg * cm * vn * vt
-            gx, gy = gt * tx + gn * nx, gt * ty + gn * ny
-            R[_ix(2 * i, r)] += pn * nx - gx
-            R[_ix(2 * i + 1, r)] += pn * ny - gy
-            R[_ix(2 * i + 2, r)] += pn * nx + gx
-            R[_ix(2 * i + 3, r)] += pn * ny + gy
+            l, tx, ty, nx, ny, vt, vn = _momentum_edge(E, v, R, cm, 1.0, -dt, i, r)
             if jac:
                 parts = forces.momentum_jacobian(cm, l, tx, ty, nx, ny, vt, vn, dt)
                 _momentum_block(J, r, i, i, -1.0, -1.0, nx, ny, parts)
@@ -412,18 +468,13 @@ def solve(J, b, n):
 
 @njit(cache=True, error_model="numpy")
 def allocate(n2):
-    """A block's flat arrays for robots of ``n2 = 2N`` unknowns (see :func:`gather`).
-
-    q, v, q0, v0, fext, m, p0, kbar, lbar, F, R, A, J, Newton's vacc and dv, then the edges'
-    lengths and unit tangents (three rows an edge), then :func:`newton`'s per-lane work: two
-    rows of residual figures, the lanes whose factors kept their rows, the lanes on the common
-    path and how each ended. Allocated once per thread and reused for every block it steps.
-    """
+    """A :class:`Block` for robots of ``n2 = 2N`` unknowns, allocated once per thread and reused."""
     n, N = n2 * LANES, n2 // 2
     z = np.zeros
-    return (z(n), z(n), z(n), z(n), z(n), z(n), z(n), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z(n),
-            z(n2 * WIDTH * LANES), z(n), z(n), z(3 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
-            z((N_LANE_RES, LANES)), z(LANES, dtype=np.bool_), z(LANES, dtype=np.bool_), z(LANES, dtype=np.int64))  # fmt: skip
+    return Block(z(n), z(n), z(n), z(n), z(n), z(n), z(n), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n),
+                 z(n), z(n2 * WIDTH * LANES), z(n), z(n), z(3 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
+                 z((N_LANE_RES, LANES)), z(LANES, dtype=np.bool_), z(LANES, dtype=np.bool_),
+                 z(LANES, dtype=np.int64), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z((2, LANES)))  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
@@ -433,25 +484,30 @@ def eligible(prm):
 
 
 @njit(cache=True, error_model="numpy")
-def gather(s, first, x, p):
-    """Copy the stage's start of robots ``first`` .. ``first + LANES - 1`` (stacked ``SimArrays`` ``s``) into the block."""
-    q, v, q0, v0, fext, m, p0, kbar, lbar = x[:9]
+def take(s, uk, first, x, p):
+    """Copy robots ``first`` .. ``first + LANES - 1`` of stacked ``SimArrays`` ``s`` (inputs ``uk``) into block ``x``.
+
+    Their state (:class:`Block`) and, into ``p``, their parameters (``L_*`` rows).
+    """
     n2 = s.q.shape[1]
     for r in range(LANES):
         i = first + r
         buf, prm = s.buf[i], s.prm[i]
         for k in range(n2):
-            q[_ix(k, r)] = s.q[i, k]
-            v[_ix(k, r)] = s.v[i, k]
-            q0[_ix(k, r)] = buf[B_Q0, k]
-            v0[_ix(k, r)] = buf[B_V0, k]
-            fext[_ix(k, r)] = buf[B_FEXT, k]
-            m[_ix(k, r)] = buf[B_M, k]
-            p0[_ix(k, r)] = buf[B_P0, k]
+            x.q[_ix(k, r)] = s.q[i, k]
+            x.v[_ix(k, r)] = s.v[i, k]
+            x.q0[_ix(k, r)] = buf[B_Q0, k]
+            x.v0[_ix(k, r)] = buf[B_V0, k]
+            x.vstep[_ix(k, r)] = buf[B_VSTEP, k]
+            x.fext[_ix(k, r)] = buf[B_FEXT, k]
+            x.m[_ix(k, r)] = buf[B_M, k]
+            x.p0[_ix(k, r)] = buf[B_P0, k]
         for k in range(s.kbar.shape[1]):
-            kbar[_ix(k, r)] = s.kbar[i, k]
+            x.kbar[_ix(k, r)] = s.kbar[i, k]
+            x.uk[_ix(k, r)] = uk[i, k]
         for k in range(s.lbar.shape[1]):
-            lbar[_ix(k, r)] = s.lbar[i, k]
+            x.lbar[_ix(k, r)] = s.lbar[i, k]
+            x.lrate[_ix(k, r)] = buf[B_LRATE, k]
         p[L_EA, r], p[L_EI, r], p[L_D, r], p[L_DB, r] = prm[P_EA], prm[P_EI], prm[P_DSTRETCH], prm[P_DBEND]
         p[L_CT, r] = 0.25 * prm[P_RHO] * math.pi * prm[P_CF] * (prm[P_A] + prm[P_B])  # as assemble
         p[L_CN, r] = prm[P_RHO] * prm[P_CD] * prm[P_A]
@@ -460,12 +516,146 @@ def gather(s, first, x, p):
 
 
 @njit(cache=True, error_model="numpy")
+def put(s, i, x, r, v):
+    """Copy lane ``r`` of block ``x`` back into robot ``i`` of ``s``, with the velocity from ``v`` (``x.v`` or ``x.guess``).
+
+    What :func:`take` copied in and the step changes: ``q``, ``v``, ``kbar``, and ``buf``'s rows
+    ``B_Q0``, ``B_V0``, ``B_VSTEP``, ``B_P0``, ``B_F``, ``B_R``, ``B_A`` and ``B_GEO``. A swimmer's
+    rest lengths and length rates do not move (:func:`stage_start`).
+    """
+    n2 = s.q.shape[1]
+    buf = s.buf[i]
+    for k in range(n2):
+        s.q[i, k] = x.q[_ix(k, r)]
+        s.v[i, k] = v[_ix(k, r)]
+        buf[B_Q0, k] = x.q0[_ix(k, r)]
+        buf[B_V0, k] = x.v0[_ix(k, r)]
+        buf[B_VSTEP, k] = x.vstep[_ix(k, r)]
+        buf[B_P0, k] = x.p0[_ix(k, r)]
+        buf[B_F, k] = x.F[_ix(k, r)]
+        buf[B_R, k] = x.R[_ix(k, r)]
+        buf[B_A, k] = x.A[_ix(k, r)]
+    for k in range(s.kbar.shape[1]):
+        s.kbar[i, k] = x.kbar[_ix(k, r)]
+    for k in range(n2 // 2 - 1):
+        buf[B_GEO, k] = x.E[_ix(3 * k, r)]
+        buf[B_GEO + 1, 2 * k] = x.E[_ix(3 * k + 1, r)]
+        buf[B_GEO + 1, 2 * k + 1] = x.E[_ix(3 * k + 2, r)]
+
+
+@njit(cache=True, error_model="numpy")
+def stage_start(x, p, stage, dt):
+    """``stepper.sdirk2_stage_start`` in water for every lane: the rest shape moved, the stage's solve set up.
+
+    The lanes are swimmers (``envs.task.block_eligible``): their inputs are curvature rates, their
+    length rates zero, so ``_move_rest_shape`` moves ``kbar`` alone (``lbar`` gains ``+0``) and
+    cannot fail. Stage 0 is ``_be_start``'s in water (the velocity extrapolated by ``GAMMA``, the
+    water's momentum at the start); stage 1 is ``_sdirk2_second_start``'s.
+    """
+    q, v, q0, v0, p0, A, E, vstep = x.q, x.v, x.q0, x.v0, x.p0, x.A, x.E, x.vstep
+    n2 = q.size // LANES
+    stage_dt = (stepper.GAMMA if stage == 0 else 1.0 - stepper.GAMMA) * dt
+    for j in range(n2 // 2 - 2):
+        for r in range(LANES):
+            x.kbar[_ix(j, r)] += stage_dt * x.uk[_ix(j, r)]
+    if stage == 0:
+        for i in range(n2):
+            for r in range(LANES):
+                q0[_ix(i, r)] = q[_ix(i, r)]
+                v_prev = v0[_ix(i, r)]
+                v0[_ix(i, r)] = v[_ix(i, r)]
+                v[_ix(i, r)] += stepper.GAMMA * (v[_ix(i, r)] - v_prev)
+                p0[_ix(i, r)] = 0.0
+        _edge_geometry(q0, E, n2)
+        _momentum(E, v0, p, p0, n2)
+        return
+    c = (1.0 - stepper.GAMMA) / stepper.GAMMA
+    for i in range(n2):
+        for r in range(LANES):
+            A[_ix(i, r)] = 0.0
+    _edge_geometry(q, E, n2)
+    _momentum(E, v, p, A, n2)
+    for i in range(n2):
+        for r in range(LANES):
+            p0[_ix(i, r)] += c * (A[_ix(i, r)] - p0[_ix(i, r)])
+            vstep[_ix(i, r)] = v0[_ix(i, r)]
+            change = v[_ix(i, r)] - v0[_ix(i, r)]
+            q0[_ix(i, r)] += c * (q[_ix(i, r)] - q0[_ix(i, r)])
+            v0[_ix(i, r)] += c * change
+            v[_ix(i, r)] = v0[_ix(i, r)] + change
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _momentum(E, v, p, P, n2):
+    """Add the water's momentum ``P_f`` of every lane to ``P`` (``fluid_momentum`` with ``sp = 1``, ``sg = 0``)."""
+    for i in range(n2 // 2 - 1):
+        for r in range(LANES):
+            _momentum_edge(E, v, P, p[L_CM, r], 1.0, 0.0, i, r)
+
+
+@njit(cache=True, error_model="numpy")
+def stage_end(x, p, stage):
+    """The lanes' part of ``stepper.sdirk2_stage_end``: the powers at the stage's end, into ``x.power``.
+
+    The step's start velocity back in ``v0`` after stage 1, the edge geometry of ``q`` into ``E``,
+    ``forces.actuator_power`` into ``power[0]`` and ``forces.damping_power`` into ``power[1]``,
+    in their order of operations. The damping terms are summed for every lane, a zero added in
+    place of a term where ``damping_power`` skips it.
+    """
+    q, v, E, kbar, lbar, uk, lrate, power = x.q, x.v, x.E, x.kbar, x.lbar, x.uk, x.lrate, x.power
+    n2 = q.size // LANES
+    N = n2 // 2
+    if stage == 1:
+        for i in range(n2):
+            for r in range(LANES):
+                x.v0[_ix(i, r)] = x.vstep[_ix(i, r)]
+    _edge_geometry(q, E, n2)
+    for r in range(LANES):
+        power[0, r] = 0.0
+        power[1, r] = 0.0
+    for j in range(1, N - 1):
+        for r in range(LANES):
+            EI = p[L_EI, r]
+            lv = 0.5 * (lbar[_ix(j - 1, r)] + lbar[_ix(j, r)])
+            dk = _turning(E, j, r)[0] - kbar[_ix(j - 1, r)]
+            power[0, r] -= EI / lv * dk * uk[_ix(j - 1, r)]
+            power[0, r] -= 0.25 * EI * dk * dk / (lv * lv) * (lrate[_ix(j - 1, r)] + lrate[_ix(j, r)])
+    for k in range(N - 1):
+        for r in range(LANES):
+            ratio = E[_ix(3 * k, r)] / lbar[_ix(k, r)]
+            power[0, r] -= 0.5 * p[L_EA, r] * (ratio * ratio - 1.0) * lrate[_ix(k, r)]
+    for k in range(N - 1):
+        for r in range(LANES):
+            ex = q[_ix(2 * k + 2, r)] - q[_ix(2 * k, r)]
+            ey = q[_ix(2 * k + 3, r)] - q[_ix(2 * k + 1, r)]
+            dvx = v[_ix(2 * k + 2, r)] - v[_ix(2 * k, r)]
+            dvy = v[_ix(2 * k + 3, r)] - v[_ix(2 * k + 1, r)]
+            ld = (ex * dvx + ey * dvy) / math.sqrt(ex * ex + ey * ey)
+            ds = p[L_D, r]
+            power[1, r] += ds * ld * ld if ds > 0.0 else 0.0
+    for j in range(1, N - 1):
+        for r in range(LANES):
+            kap, g0x, g0y, g1x, g1y, g2x, g2y = _turning(E, j, r)[:7]
+            rate = (
+                g0x * v[_ix(2 * j - 2, r)]
+                + g0y * v[_ix(2 * j - 1, r)]
+                + g1x * v[_ix(2 * j, r)]
+                + g1y * v[_ix(2 * j + 1, r)]
+                + g2x * v[_ix(2 * j + 2, r)]
+                + g2y * v[_ix(2 * j + 3, r)]
+            )
+            kd = (1.0 + 0.25 * kap * kap) * rate
+            db = p[L_DB, r]
+            power[1, r] += db * kd * kd if db > 0.0 else 0.0
+
+
+@njit(cache=True, error_model="numpy")
 def _full_step(x, lanes_on, n2):
     """``_be_newton``'s update at full length for the lanes ``lanes_on``: ``v = vacc + 1 dv``.
 
     ``vacc`` = v, ``dv`` = -R solved with the factors in J; the other lanes keep their ``v``.
     """
-    v, R, J, vacc, dv = x[1], x[10], x[12], x[13], x[14]
+    v, R, J, vacc, dv = x.v, x.R, x.J, x.vacc, x.dv
     for k in range(n2 * LANES):
         vacc[k] = v[k]
         dv[k] = -R[k]
@@ -480,18 +670,18 @@ def _full_step(x, lanes_on, n2):
 def newton(s, first, go, x, p, dt, result):
     """:func:`stepper._be_newton` in water for the lanes with ``go[r]``, bit for bit.
 
-    Lane r is robot ``first + r`` of the stacked ``SimArrays`` ``s``, set up for the stage by
-    ``sdirk2_stage_start``. The block solves the common path (module docstring); a lane off it
-    is solved by ``_be_newton`` on its own arrays. Writes each lane's ``_be_newton`` result
-    (status, iterations, residual, fluid power, friction power) into ``result`` (5, LANES).
-    Returns how many lanes the block solved (the rest went to ``_be_newton``).
+    Lane r of block ``x`` is robot ``first + r`` of the stacked ``SimArrays`` ``s``, its stage
+    set up by :func:`stage_start`. The block solves the common path (module docstring). A lane
+    off it is put back into its robot as the stage started (:func:`put`), solved there by
+    ``_be_newton``, and its results taken back. Writes each lane's ``_be_newton`` result
+    (status, iterations, residual, fluid power, friction power) into ``result`` (5, LANES) and
+    its Newton counts into its robot's ``out``. Returns how many lanes the block solved.
     """
-    q, v, F, R, A, J = x[0], x[1], x[9], x[10], x[11], x[12]
-    res, res1, kept, on, done = x[16:21]
+    res, res1, kept, on, done = x.res, x.res1, x.kept, x.on, x.done
     n2 = s.q.shape[1]
     on[:] = False  # lanes on the common path
     done[:] = 0  # 0: going on; else 1 + the iterations it converged in
-    gather(s, first, x, p)
+    x.guess[:] = x.v
     residual(x, p, dt, True, res)
     for r in range(LANES):
         if not go[r]:
@@ -503,7 +693,7 @@ def newton(s, first, go, x, p, dt, result):
     iterate = on & (done == 0)
     if iterate.any():
         # the Newton step: factors, solve, the full step accepted if |R|^2 falls
-        factor(J, kept, n2)
+        factor(x.J, kept, n2)
         _full_step(x, iterate, n2)
         residual(x, p, dt, False, res1)
         for r in range(LANES):
@@ -538,7 +728,14 @@ def newton(s, first, go, x, p, dt, result):
         i = first + r
         si = layout.sim_views(s.f[i], s.ibuf[i])
         if not on[r]:
+            put(s, i, x, r, x.guess)
             status, it, rmax, pf, pfr = stepper._be_newton(si, dt, MEDIUM_WATER)
+            for k in range(n2):  # what _be_newton changed
+                x.q[_ix(k, r)] = si.q[k]
+                x.v[_ix(k, r)] = si.v[k]
+                x.F[_ix(k, r)] = si.buf[B_F, k]
+                x.R[_ix(k, r)] = si.buf[B_R, k]
+                x.A[_ix(k, r)] = si.buf[B_A, k]
         else:
             it = done[r] - 1
             rmax, pf = (res[L_RMAX, r], res[L_PFLUID, r]) if it == 0 else (res1[L_RMAX, r], res1[L_PFLUID, r])
@@ -547,12 +744,5 @@ def newton(s, first, go, x, p, dt, result):
             out[O_NJAC] += 1.0
             out[O_NRES] += it
             out[O_NFACTOR] += 1.0 if it > 0 else 0.0
-            buf = si.buf
-            for k in range(n2):
-                si.q[k] = q[_ix(k, r)]
-                si.v[k] = v[_ix(k, r)]
-                buf[B_F, k] = F[_ix(k, r)]
-                buf[B_R, k] = R[_ix(k, r)]
-                buf[B_A, k] = A[_ix(k, r)]
         result[0, r], result[1, r], result[2, r], result[3, r], result[4, r] = status, it, rmax, pf, pfr
     return (on & go).sum()

@@ -634,21 +634,33 @@ def sdirk2_stage_end(s, stage, dt, u_k, damped, newton, acc):
     """Account SDIRK2 stage ``stage`` solved with ``newton`` (:func:`_be_newton`'s result).
 
     ``acc`` = (iterations, residual, fluid, damping and friction energy, actuator work) so far;
-    returns (status, the new ``acc``), the stage's powers weighted by its quadrature weight.
+    returns (status, the new ``acc``), the stage's powers weighted by its quadrature weight
+    (:func:`sdirk2_stage_sums`). After stage 1 the step's start velocity goes back into ``v0``.
     """
     q, v, kbar, prm, buf = s.q, s.v, s.kbar, s.prm, s.buf
     lrate, geo = buf[B_LRATE, : s.lbar.size], buf[B_GEO : B_GEO + 2]
-    status, it, res, p_fluid, p_fric = newton
-    iters, _, e_fluid, e_damp, e_fric, e_act = acc
     if stage == 1:
         buf[B_V0, :] = buf[B_VSTEP]  # the step's start, for the next step's first guess
+    edge_geometry(q, geo)
+    p_act = actuator_power(q, kbar, s.lbar, u_k, lrate, prm, geo)
+    p_damp = damping_power(q, v, prm, geo) if damped else 0.0
+    return sdirk2_stage_sums(stage, dt, damped, newton, p_act, p_damp, acc)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def sdirk2_stage_sums(stage, dt, damped, newton, p_act, p_damp, acc):
+    """:func:`sdirk2_stage_end`'s sums: ``acc`` plus the stage's iterations and powers times its weight.
+
+    ``lanes.stage_end`` computes the powers of sixteen robots at once and sums them here.
+    """
+    status, it, res, p_fluid, p_fric = newton
+    iters, _, e_fluid, e_damp, e_fric, e_act = acc
     w = (1.0 - GAMMA if stage == 0 else GAMMA) * dt
     e_fluid += w * p_fluid
     e_fric += w * p_fric
-    edge_geometry(q, geo)
-    e_act += w * actuator_power(q, kbar, s.lbar, u_k, lrate, prm, geo)
+    e_act += w * p_act
     if damped:
-        e_damp += w * damping_power(q, v, prm, geo)
+        e_damp += w * p_damp
     return status, (iters + it, res, e_fluid, e_damp, e_fric, e_act)
 
 
