@@ -705,17 +705,27 @@ def block_step(s, t, first, status, scratch):
                 resid[r] = max(resid[r], acc[0, r])
                 for k in range(4):
                     energy[k, r] += acc[k + 1, r]
+    lanes.energies(x, p)
     for r in range(n_lanes):
         i = first + r
         if state[r] == BAD_ACTION:
             status[i] = BAD_ACTION
             continue
-        if state[r] == L.OK:
-            lanes.put(s, i, x, r, x.v)
         si, ti = _robot(s, t, i)
+        st = state[r]
+        if st == L.OK:
+            lanes.put(s, i, x, r, x.v)
         st = stepper.end_step(
-            si, state[r], niter[r], resid[r], energy[0, r], energy[1, r], energy[2, r], energy[3, r]
+            si, st, niter[r], resid[r], energy[0, r], energy[1, r], energy[2, r], energy[3, r]
         )
-        stepper.ledger_energies(si)
+        if state[r] == L.OK:  # the block's energies are this robot's
+            si.out[L.O_E_KIN], si.out[L.O_E_ELASTIC], si.out[L.O_T_FLUID] = (
+                x.energy[0, r],
+                x.energy[1, r],
+                x.energy[2, r],
+            )
+            stepper.ledger(si.out)
+        else:  # put back earlier: the block moved on
+            stepper.ledger_energies(si)
         step_end(si, ti, st, sq[r], (before[0, r], before[1, r], before[2, r]))
         status[i] = st

@@ -99,7 +99,7 @@ class Block(NamedTuple):
     the stage's first guess ``guess``; :func:`newton`'s per-lane residual figures ``res``,
     ``res1``, the lanes whose factors kept their rows ``kept``, the lanes on the common path
     ``on`` and how each ended ``done``; the stage's actuator and damping power per lane
-    ``power`` (2, LANES).
+    ``power`` (2, LANES), and the energies at the step's end ``energy`` (3, LANES).
     """
 
     q: np.ndarray
@@ -128,6 +128,7 @@ class Block(NamedTuple):
     vstep: np.ndarray
     guess: np.ndarray
     power: np.ndarray
+    energy: np.ndarray
 
 
 @njit(cache=True, inline="always")
@@ -474,7 +475,7 @@ def allocate(n2):
     return Block(z(n), z(n), z(n), z(n), z(n), z(n), z(n), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n),
                  z(n), z(n2 * WIDTH * LANES), z(n), z(n), z(3 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
                  z((N_LANE_RES, LANES)), z(LANES, dtype=np.bool_), z(LANES, dtype=np.bool_),
-                 z(LANES, dtype=np.int64), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z((2, LANES)))  # fmt: skip
+                 z(LANES, dtype=np.int64), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z((2, LANES)), z((3, LANES)))  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
@@ -647,6 +648,42 @@ def stage_end(x, p, stage):
             kd = (1.0 + 0.25 * kap * kap) * rate
             db = p[L_DB, r]
             power[1, r] += db * kd * kd if db > 0.0 else 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def energies(x, p):
+    """``stepper.ledger_energies``'s energies for every lane, after :func:`stage_end`, into ``x.energy``.
+
+    The body's kinetic energy, ``forces.elastic_energy`` and ``forces.fluid_kinetic_energy``, in
+    their order of operations; the edges' lengths and turning from ``E`` (the same bits as from
+    ``q``, see ``geometry.turning_at``).
+    """
+    q, v, m, E, kbar, lbar, energy = x.q, x.v, x.m, x.E, x.kbar, x.lbar, x.energy
+    n2 = q.size // LANES
+    N = n2 // 2
+    for r in range(LANES):
+        energy[0, r] = 0.0
+        energy[1, r] = 0.0
+        energy[2, r] = 0.0
+    for i in range(n2):
+        for r in range(LANES):
+            energy[0, r] += 0.5 * m[_ix(i, r)] * v[_ix(i, r)] * v[_ix(i, r)]
+    for k in range(N - 1):
+        for r in range(LANES):
+            s = E[_ix(3 * k, r)] / lbar[_ix(k, r)] - 1.0
+            energy[1, r] += 0.5 * p[L_EA, r] * s * s * lbar[_ix(k, r)]
+    for j in range(1, N - 1):
+        for r in range(LANES):
+            dk = _turning(E, j, r)[0] - kbar[_ix(j - 1, r)]
+            energy[1, r] += 0.5 * p[L_EI, r] / (0.5 * (lbar[_ix(j - 1, r)] + lbar[_ix(j, r)])) * dk * dk
+    for i in range(N - 1):
+        for r in range(LANES):
+            ex = q[_ix(2 * i + 2, r)] - q[_ix(2 * i, r)]
+            ey = q[_ix(2 * i + 3, r)] - q[_ix(2 * i + 1, r)]
+            vx = 0.5 * (v[_ix(2 * i, r)] + v[_ix(2 * i + 2, r)])
+            vy = 0.5 * (v[_ix(2 * i + 1, r)] + v[_ix(2 * i + 3, r)])
+            w = vy * ex - vx * ey  # l v_n
+            energy[2, r] += 0.5 * p[L_CM, r] * w * w / E[_ix(3 * i, r)]
 
 
 @njit(cache=True, error_model="numpy")

@@ -546,6 +546,15 @@ def ledger_energies(s):
     out[O_E_KIN] = ke
     out[O_E_ELASTIC] = elastic_energy(q, kbar, lbar, prm)
     out[O_T_FLUID] = fluid_kinetic_energy(q, v, prm) if int(prm[P_MEDIUM]) == MEDIUM_WATER else 0.0
+    ledger(out)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def ledger(out):
+    """The energy ledger into ``out[O_LEDGER:]`` from the energies in ``out`` (:func:`ledger_energies`).
+
+    ``lanes.energies`` computes the energies of sixteen robots at once; the ledger is this.
+    """
     # the ledger since O_L0_*: actuator work = dissipation + energy changes + error
     work = out[O_W_ACT] - out[O_L0_W_ACT]
     error = work
