@@ -57,7 +57,7 @@ def _loop_check(k, q, v, kbar, lbar, uk, ul, prm, buf, ibuf):
 def _loop_observe(k, sa, ta):
     s = 0.0
     for _ in range(k):
-        s += T._observe(sa, ta)
+        s += T._observe(sa, ta, False)
     return s
 
 

@@ -203,26 +203,15 @@ def test_the_block_newton_leaves_every_robot_as_be_newton(stage):
 def test_the_vector_env_steps_blocks_and_leftovers_as_single_envs_with_two_threads():
     """35 eels (two blocks, three robots one by one) against the same eels robot by robot."""
     n = 2 * LANES + 3
-    rng = np.random.default_rng(7)
-    actions = rng.uniform(-1, 1, (60, n, 8))
-    runs = []
-    for blocks in (True, False):
+    actions = np.random.default_rng(7).uniform(-1, 1, (60, n, 8))
+
+    def eels():
         venv = SoftVectorEnv("SoftEel-v0", n, num_threads=2, max_episode_steps=None, max_curvature_rate=30.0)
         venv.reset(seed=4)
-        sim, task = venv.batch.sim, venv.batch.task
-        status = np.zeros(n, dtype=np.int64)
-        for a in actions:
-            task.act[:] = a
-            active = status == L.OK
-            if blocks:
-                T.batch_step(active, tuple(sim), tuple(task), status, 2)
-            else:
-                _robot_by_robot(active, tuple(sim), tuple(task), status)
-        runs.append((_state(sim, task), status.copy()))
-    (a, status_a), (b, status_b) = runs
-    assert all(np.array_equal(_bits(x), _bits(y)) for x, y in zip(a, b, strict=True))
-    assert np.array_equal(status_a, status_b)
-    assert (status_a == L.OK).sum() > n // 2 and (status_a != L.OK).any()  # most swim, some fail
+        return venv
+
+    status = _blocks_against_robot_step(eels, actions, threads=2)
+    assert (status == L.OK).sum() > n // 2 and (status != L.OK).any()  # most swim, some fail
 
 
 def test_robots_that_fail_inside_a_block_step_end_as_robot_step_leaves_them():
@@ -233,30 +222,46 @@ def test_robots_that_fail_inside_a_block_step_end_as_robot_step_leaves_them():
     solves them on their robots' arrays, the block takes them back, and puts a failed lane back
     at once. Every robot's state and status against ``robot_step``.
     """
-    rng = np.random.default_rng(8)
-    actions = rng.uniform(-1, 1, (4, LANES, 8))
-    runs = []
-    for blocks in (True, False):
+
+    def eels():
         venv = _eels(seed=6)
-        sim, task = venv.batch.sim, venv.batch.task
+        sim = venv.batch.sim
         sim.prm[:, L.P_SUBSTEPS] = 2
         sim.prm[9, L.P_MAXIT] = 1
         sim.prm[11, L.P_CHORD] = 0.0
         sim.v[7, 4] = np.nan
-        status = np.zeros(LANES, dtype=np.int64)
+        return venv
+
+    status = _blocks_against_robot_step(
+        eels, np.random.default_rng(8).uniform(-1, 1, (4, LANES, 8)), threads=1
+    )
+    assert status[7] == L.NON_FINITE and status[9] == L.NOT_CONVERGED  # they failed in a stage
+    assert (status == L.OK).sum() == LANES - 2
+
+
+def _blocks_against_robot_step(make, actions: np.ndarray, threads: int) -> np.ndarray:
+    """Step the robots of ``make()`` through ``actions`` by ``batch_step`` and robot by robot.
+
+    Asserts that every array (but Newton's scratch) and every status end bit for bit the same;
+    returns the statuses.
+    """
+    runs = []
+    for blocks in (True, False):
+        venv = make()
+        sim, task = venv.batch.sim, venv.batch.task
+        status = np.zeros(venv.num_envs, dtype=np.int64)
         for a in actions:
             task.act[:] = a
             active = status == L.OK
             if blocks:
-                T.batch_step(active, tuple(sim), tuple(task), status, 1)
+                T.batch_step(active, tuple(sim), tuple(task), status, threads)
             else:
                 _robot_by_robot(active, tuple(sim), tuple(task), status)
         runs.append((_state(sim, task), status.copy()))
     (a, status_a), (b, status_b) = runs
     assert all(np.array_equal(_bits(x), _bits(y)) for x, y in zip(a, b, strict=True))
     assert np.array_equal(status_a, status_b)
-    assert status_a[7] == L.NON_FINITE and status_a[9] == L.NOT_CONVERGED  # they failed in a stage
-    assert (status_a == L.OK).sum() == LANES - 2
+    return status_a
 
 
 def _state(sim, task) -> list[np.ndarray]:

@@ -95,6 +95,16 @@ def swim_observation(q, v, kbar, w, goal, low, high, raw, out, geo):
     n = kbar.size
     geometry.edge_geometry(q, geo)
     geometry.curvatures_and_rates_at(geo, v, raw[:n], raw[n : 2 * n])
+    return swim_observation_curved(q, v, kbar, w, goal, low, high, raw, out)
+
+
+@njit(cache=True, error_model="numpy")
+def swim_observation_curved(q, v, kbar, w, goal, low, high, raw, out):
+    """:func:`swim_observation` with the curvatures and their rates already in ``raw[:2 (N-2)]``.
+
+    The batched env's blocks of eels compute those for sixteen eels at once (``lanes.stage_end``).
+    """
+    n = kbar.size
     for j in range(n):
         raw[2 * n + j] = kbar[j]
     heading, along, lateral = body_velocity(q, v, w)

@@ -284,12 +284,19 @@ def episode_metrics(r: Any, keys: tuple[str, ...]) -> dict[str, Any]:
 
 
 @njit(cache=True, error_model="numpy")
-def _observe(s, t):
+def _observe(s, t, curved):
+    """The observation into ``t.obs``; returns the heading.
+
+    ``curved``: a swimmer's curvatures and their rates are already in ``t.raw``.
+    """
     if int(t.tp[T_KIND]) == SWIM:
         if int(t.tp[T_TASK]) != TASK_DIRECTION:  # the distance to the target or the cross-track error
             t.raw[t.raw.size - 1] = t.rs[R_NAV]
+        w, goal = t.w, t.tp[T_GOAL]
+        if curved:
+            return observe.swim_observation_curved(s.q, s.v, s.kbar, w, goal, t.low, t.high, t.raw, t.obs)
         geo = s.buf[L.B_GEO : L.B_GEO + 2]
-        return observe.swim_observation(s.q, s.v, s.kbar, t.w, t.tp[T_GOAL], t.low, t.high, t.raw, t.obs, geo)
+        return observe.swim_observation(s.q, s.v, s.kbar, w, goal, t.low, t.high, t.raw, t.obs, geo)
     ground = int(s.prm[L.P_MEDIUM]) == L.MEDIUM_GROUND
     return observe.inch_observation(
         s.q, s.v, s.lbar, s.ibuf[L.I_FRICTION], ground, t.w, t.low, t.high, t.raw, t.obs
@@ -408,7 +415,7 @@ def robot_reset(s, t):
         rs[R_S0] = rs[R_S]
         rs[M_N2] = math.inf  # time to goal: not reached yet
     _metrics(s.out, s.prm, t.tp, rs)
-    rs[R_HEADING] = _observe(s, t)
+    rs[R_HEADING] = _observe(s, t, False)
 
 
 @njit(cache=True, error_model="numpy")
@@ -431,7 +438,7 @@ def robot_step(s, t):
         return BAD_ACTION
     before = energies_before(s)
     status = stepper.simulate(s, t.uk, t.ul, int(t.tp[T_NSUB]))
-    step_end(s, t, status, sq, before)
+    step_end(s, t, status, sq, before, False)
     return status
 
 
@@ -463,11 +470,11 @@ def energies_before(s):
 
 
 @njit(cache=True, error_model="numpy")
-def step_end(s, t, status, sq, before):
+def step_end(s, t, status, sq, before, curved):
     """The end of :func:`robot_step`, after the physics ended with ``status``.
 
     The centre of mass, powers, observation and metrics (on success), the reward terms and the
-    reward (always).
+    reward (always). ``curved``: a swimmer's curvatures and rates are already in ``t.raw``.
     """
     q, prm, out = s.q, s.prm, s.out
     tp, rs, w = t.tp, t.rs, t.w
@@ -510,7 +517,7 @@ def step_end(s, t, status, sq, before):
             rs[R_P_MED] = d_med / dt
         rs[R_COMX] = x
         rs[R_COMY] = y
-        rs[R_HEADING] = _observe(s, t)
+        rs[R_HEADING] = _observe(s, t, curved)
         _metrics(out, prm, tp, rs)
     else:
         fwd = 0.0
@@ -712,20 +719,20 @@ def block_step(s, t, first, status, scratch):
             status[i] = BAD_ACTION
             continue
         si, ti = _robot(s, t, i)
-        st = state[r]
-        if st == L.OK:
+        together = state[r] == L.OK  # else put back earlier: the block moved on
+        if together:
             lanes.put(s, i, x, r, x.v)
         st = stepper.end_step(
-            si, st, niter[r], resid[r], energy[0, r], energy[1, r], energy[2, r], energy[3, r]
+            si, state[r], niter[r], resid[r], energy[0, r], energy[1, r], energy[2, r], energy[3, r]
         )
-        if state[r] == L.OK:  # the block's energies are this robot's
-            si.out[L.O_E_KIN], si.out[L.O_E_ELASTIC], si.out[L.O_T_FLUID] = (
-                x.energy[0, r],
-                x.energy[1, r],
-                x.energy[2, r],
-            )
-            stepper.ledger(si.out)
-        else:  # put back earlier: the block moved on
+        out, e = si.out, x.energy
+        if together:  # the block's energies are this robot's
+            out[L.O_E_KIN], out[L.O_E_ELASTIC], out[L.O_T_FLUID] = e[0, r], e[1, r], e[2, r]
+            stepper.ledger(out)
+        else:
             stepper.ledger_energies(si)
-        step_end(si, ti, st, sq[r], (before[0, r], before[1, r], before[2, r]))
+        curved = together and st == L.OK  # and its curvatures and rates, for the observation
+        if curved:
+            lanes.curvatures_into(x, r, ti.raw)
+        step_end(si, ti, st, sq[r], (before[0, r], before[1, r], before[2, r]), curved)
         status[i] = st

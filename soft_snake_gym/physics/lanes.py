@@ -99,7 +99,8 @@ class Block(NamedTuple):
     the stage's first guess ``guess``; :func:`newton`'s per-lane residual figures ``res``,
     ``res1``, the lanes whose factors kept their rows ``kept``, the lanes on the common path
     ``on`` and how each ended ``done``; the stage's actuator and damping power per lane
-    ``power`` (2, LANES), and the energies at the step's end ``energy`` (3, LANES).
+    ``power`` (2, LANES), the curvatures and their rates at the stage's end ``curv`` (2 (N-2)
+    rows), and the energies at the step's end ``energy`` (3, LANES).
     """
 
     q: np.ndarray
@@ -128,6 +129,7 @@ class Block(NamedTuple):
     vstep: np.ndarray
     guess: np.ndarray
     power: np.ndarray
+    curv: np.ndarray
     energy: np.ndarray
 
 
@@ -243,6 +245,19 @@ def _momentum_edge(E, v, R, cm, sp, sg, i, r):
     return l, tx, ty, nx, ny, vt, vn
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _turning_rate(v, j, r, g0x, g0y, g1x, g1y, g2x, g2y):
+    """``geometry.turning_rate`` at node j of lane r, the gradient ``g`` from :func:`_turning`."""
+    return (
+        g0x * v[_ix(2 * j - 2, r)]
+        + g0y * v[_ix(2 * j - 1, r)]
+        + g1x * v[_ix(2 * j, r)]
+        + g1y * v[_ix(2 * j + 1, r)]
+        + g2x * v[_ix(2 * j + 2, r)]
+        + g2y * v[_ix(2 * j + 3, r)]
+    )
+
+
 @njit(cache=True, error_model="numpy")
 def residual(x, p, dt, jac, res):
     """``stepper._be_residual`` in water with the consistent added mass, for every lane of a block.
@@ -313,14 +328,7 @@ def _residual(x, p, dt, jac, res):
             dk = kap - kbar[_ix(j - 1, r)]
             w = 1.0 + 0.25 * kap * kap
             db = p[L_DB, r]
-            phidot = (
-                g0x * v[_ix(2 * j - 2, r)]
-                + g0y * v[_ix(2 * j - 1, r)]
-                + g1x * v[_ix(2 * j, r)]
-                + g1y * v[_ix(2 * j + 1, r)]
-                + g2x * v[_ix(2 * j + 2, r)]
-                + g2y * v[_ix(2 * j + 3, r)]
-            )
+            phidot = _turning_rate(v, j, r, g0x, g0y, g1x, g1y, g2x, g2y)
             s = kb * dk * w + db * w * w * phidot
             F[_ix(2 * j - 2, r)] -= s * g0x
             F[_ix(2 * j - 1, r)] -= s * g0y
@@ -475,7 +483,8 @@ def allocate(n2):
     return Block(z(n), z(n), z(n), z(n), z(n), z(n), z(n), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n),
                  z(n), z(n2 * WIDTH * LANES), z(n), z(n), z(3 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
                  z((N_LANE_RES, LANES)), z(LANES, dtype=np.bool_), z(LANES, dtype=np.bool_),
-                 z(LANES, dtype=np.int64), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z((2, LANES)), z((3, LANES)))  # fmt: skip
+                 z(LANES, dtype=np.int64), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z((2, LANES)), z(2 * (N - 2) * LANES),
+                 z((3, LANES)))  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
@@ -600,7 +609,7 @@ def stage_end(x, p, stage):
 
     The step's start velocity back in ``v0`` after stage 1, the edge geometry of ``q`` into ``E``,
     ``forces.actuator_power`` into ``power[0]`` and ``forces.damping_power`` into ``power[1]``,
-    in their order of operations. The damping terms are summed for every lane, a zero added in
+    in their order of operations; on the way, the curvatures and their rates into ``x.curv``. The damping terms are summed for every lane, a zero added in
     place of a term where ``damping_power`` skips it.
     """
     q, v, E, kbar, lbar, uk, lrate, power = x.q, x.v, x.E, x.kbar, x.lbar, x.uk, x.lrate, x.power
@@ -637,17 +646,18 @@ def stage_end(x, p, stage):
     for j in range(1, N - 1):
         for r in range(LANES):
             kap, g0x, g0y, g1x, g1y, g2x, g2y = _turning(E, j, r)[:7]
-            rate = (
-                g0x * v[_ix(2 * j - 2, r)]
-                + g0y * v[_ix(2 * j - 1, r)]
-                + g1x * v[_ix(2 * j, r)]
-                + g1y * v[_ix(2 * j + 1, r)]
-                + g2x * v[_ix(2 * j + 2, r)]
-                + g2y * v[_ix(2 * j + 3, r)]
-            )
-            kd = (1.0 + 0.25 * kap * kap) * rate
+            kd = (1.0 + 0.25 * kap * kap) * _turning_rate(v, j, r, g0x, g0y, g1x, g1y, g2x, g2y)
+            x.curv[_ix(j - 1, r)] = kap  # geometry.curvatures_and_rates_at, for the observation
+            x.curv[_ix(N - 3 + j, r)] = kd
             db = p[L_DB, r]
             power[1, r] += db * kd * kd if db > 0.0 else 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def curvatures_into(x, r, raw):
+    """Lane ``r``'s curvatures and their rates from the last :func:`stage_end` into ``raw[:2 (N-2)]``."""
+    for j in range(2 * (x.kbar.size // LANES)):
+        raw[j] = x.curv[_ix(j, r)]
 
 
 @njit(cache=True, error_model="numpy")
