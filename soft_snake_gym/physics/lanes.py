@@ -1,10 +1,12 @@
 """Sixteen robots per instruction: SDIRK2's backward-Euler stages in water, solved for a block at once.
 
-The batched env (``envs.task.batch_step``) steps its robots in blocks of :data:`LANES`. In a
-block every robot runs the same arithmetic on its own numbers, so the Newton solve of a stage
-(:func:`stepper._be_newton`) is done for the whole block with each robot in one lane of the
-CPU's vector registers: the residual with its Jacobian, the banded factorization and the
-solves. LLVM vectorizes a loop over the lanes only in one form, found with
+The batched env (``envs.task.batch_step``) steps its swimmers in blocks of :data:`LANES`. In a
+block every robot runs the same arithmetic on its own numbers, so each SDIRK2 stage is done for
+the whole block with each robot in one lane of the CPU's vector registers: the stage's start
+(:func:`stage_start`), its Newton solve (:func:`newton`: the residual with its Jacobian, the
+banded factorization and the solves), its end (:func:`stage_end`: the powers, and the
+curvatures for the observation), then the energies (:func:`energies`). :func:`take` copies the
+robots into a :class:`Block` once a step and :func:`put` copies them back. LLVM vectorizes a loop over the lanes only in one form, found with
 ``scripts/probe_soa.py`` (docs/performance.md, "Sixteen lanes"):
 
 - every array of the block is flat, element ``i`` of lane ``r`` at ``i * LANES + r`` (a band
@@ -22,9 +24,10 @@ stage takes in water: one Newton step (Jacobian, factorization, solve, a full st
 and, unless that converged, one chord step with the same factors; or none if the first guess
 converged. Each lane checks that :func:`stepper._be_newton` would have decided the same at
 each point. A lane where it would not (a line search, a renewed Jacobian, a row exchange, a
-third iteration, no convergence) is solved again from the stage's start by ``_be_newton``
-itself. A block's robots therefore end every stage exactly as the single env's, which the
-tests compare bit for bit.
+third iteration, no convergence) is put back into its robot as the stage started, solved
+there by ``_be_newton`` itself, and taken back. A block's robots therefore end every stage
+exactly as the single env's, which the tests compare bit for bit. Transcendental functions stay
+out of the lane loops: numba may vectorize them with SVML, whose digits are not libm's.
 """
 
 from __future__ import annotations
