@@ -63,11 +63,18 @@ def _scalar_residuals(s, dt, jac, res):
 
 
 @njit
-def _block_residuals(s, uk, dt, jac, res):
-    s = SimArrays(*s)
+def _taken(s, uk):
+    """The first LANES robots of ``s`` (inputs ``uk``) taken into a new block: (block, parameters)."""
     x = lanes.allocate(s.q.shape[1])
     p = np.empty((lanes.N_LANE_PRM, LANES))
     lanes.take(s, uk, 0, x, p)
+    return x, p
+
+
+@njit
+def _block_residuals(s, uk, dt, jac, res):
+    s = SimArrays(*s)
+    x, p = _taken(s, uk)
     lanes.residual(x, p, dt, jac, res)
     return x
 
@@ -84,9 +91,7 @@ def _scalar_newton(s, dt, result):
 def _block_newton(s, uk, go, dt, result):
     """The stages' start taken into a block, solved there, and the lanes that ran put back."""
     s = SimArrays(*s)
-    x = lanes.allocate(s.q.shape[1])
-    p = np.empty((lanes.N_LANE_PRM, LANES))
-    lanes.take(s, uk, 0, x, p)
+    x, p = _taken(s, uk)
     solved = lanes.newton(s, 0, go, x, p, dt, result)
     for r in range(LANES):
         if go[r]:

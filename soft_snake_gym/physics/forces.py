@@ -96,23 +96,19 @@ def drag_jacobian(ct, cn, l, tx, ty, nx, ny, vt, vn, gt, gn, cx, cv):
     # d F_edge / d e (e = x[i+1] - x[i]), half of it per node, sign by node
     #   = -ct [gt t t^T + dgt vn t n^T + gt n n^T] - cn [gn n t^T - dgn vt n n^T - gn t n^T]
     hx = 0.5 * cx
-    d00 = -hx * (
-        ct * (gt * tx * tx + dgt * vn * tx * nx + gt * nx * nx)
-        + cn * (gn * nx * tx - dgn * vt * nx * nx - gn * tx * nx)
-    )
-    d01 = -hx * (
-        ct * (gt * tx * ty + dgt * vn * tx * ny + gt * nx * ny)
-        + cn * (gn * nx * ty - dgn * vt * nx * ny - gn * tx * ny)
-    )
-    d10 = -hx * (
-        ct * (gt * ty * tx + dgt * vn * ty * nx + gt * ny * nx)
-        + cn * (gn * ny * tx - dgn * vt * ny * nx - gn * ty * nx)
-    )
-    d11 = -hx * (
-        ct * (gt * ty * ty + dgt * vn * ty * ny + gt * ny * ny)
-        + cn * (gn * ny * ty - dgn * vt * ny * ny - gn * ty * ny)
-    )
+    d00 = -hx * _drag_entry(ct, cn, gt, gn, dgt, dgn, vt, vn, tx, nx, tx, nx)
+    d01 = -hx * _drag_entry(ct, cn, gt, gn, dgt, dgn, vt, vn, tx, nx, ty, ny)
+    d10 = -hx * _drag_entry(ct, cn, gt, gn, dgt, dgn, vt, vn, ty, ny, tx, nx)
+    d11 = -hx * _drag_entry(ct, cn, gt, gn, dgt, dgn, vt, vn, ty, ny, ty, ny)
     return c00, c01, c11, d00, d01, d10, d11
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _drag_entry(ct, cn, gt, gn, dgt, dgn, vt, vn, ta, na, tb, nb):
+    """Entry (a, b) of :func:`drag_jacobian`'s bracket, from the a-th and b-th components of ``t`` and ``n``."""
+    return ct * (gt * ta * tb + dgt * vn * ta * nb + gt * na * nb) + cn * (
+        gn * na * tb - dgn * vt * na * nb - gn * ta * nb
+    )
 
 
 @njit(cache=True, error_model="numpy")
