@@ -225,7 +225,8 @@ def test_robots_that_fail_inside_a_block_step_end_as_robot_step_leaves_them():
     Lane 7 starts with a NaN velocity (its first stage fails), lane 9 may take one Newton
     iteration (it fails where one is not enough), lane 11 renews its Jacobian: ``_be_newton``
     solves them on their robots' arrays, the block takes them back, and puts a failed lane back
-    at once. Every robot's state and status against ``robot_step``.
+    at once. The failed robots are not stepped again: in the later steps their lanes idle in the
+    block. Every robot's state and status against ``robot_step``.
     """
 
     def eels():

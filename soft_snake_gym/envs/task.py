@@ -119,6 +119,8 @@ N_RS = M0 + 11
 BAD_ACTION = -1
 """Status of a step refused because the action has a non-finite entry (nothing was stepped)."""
 
+_IDLE = -2  # block_step's state of a lane whose robot is not stepped
+
 TERM_KEYS = ("reward_forward", "reward_energy", "reward_ctrl", "reward_failure")
 """Names of the reward terms ``rs[R_RF:R_RFAIL+1]``."""
 
@@ -618,15 +620,17 @@ def _step_unit(active, s, t, status, u, scratch):
 @njit(cache=True, error_model="numpy")
 def _step_block(active, s, t, status, first, scratch):
     """Robots ``first`` .. ``first + LANES - 1``: by :func:`block_step` if it takes them all, else one by one."""
-    together = True
+    together = False  # a robot to step, and all of them eligible alike
+    for r in range(lanes.LANES):
+        together |= active[first + r]
     for r in range(lanes.LANES):
         i = first + r
-        together &= active[i] and block_eligible(s.prm[i], t.tp[i])
+        together &= block_eligible(s.prm[i], t.tp[i])
         together &= (
             s.prm[i, L.P_H] == s.prm[first, L.P_H] and s.prm[i, L.P_SUBSTEPS] == s.prm[first, L.P_SUBSTEPS]
         )
     if together:
-        block_step(s, t, first, status, scratch)
+        block_step(active, s, t, first, status, scratch)
         return
     for r in range(lanes.LANES):
         i = first + r
@@ -651,11 +655,12 @@ def block_eligible(prm, tp):
 
 
 @njit(cache=True, error_model="numpy")
-def block_step(s, t, first, status, scratch):
-    """:func:`robot_step` for the ``LANES`` robots from ``first``, each SDIRK2 stage for all at once.
+def block_step(active, s, t, first, status, scratch):
+    """:func:`robot_step` for the ``active`` robots of the ``LANES`` from ``first``, each SDIRK2 stage at once.
 
     Every robot must be :func:`block_eligible`, with the same ``h`` and sub-steps; ``scratch`` is
-    :func:`_block_scratch`'s. It is :func:`robot_step` with ``stepper.simulate``'s step of SDIRK2
+    :func:`_block_scratch`'s. An inactive robot's lane idles: the block computes it, as a lane whose
+    action is bad, and nothing of it is put back, as :func:`batch_step` leaves that robot alone. It is :func:`robot_step` with ``stepper.simulate``'s step of SDIRK2
     sub-steps written out: each robot's task start and end and the step's end are the same
     functions, the stages run in the block (``lanes.stage_start``, ``lanes.newton``,
     ``lanes.stage_end``) in the scalar kernels' order of operations, and the sums are
@@ -669,6 +674,9 @@ def block_step(s, t, first, status, scratch):
     resid[:] = 0.0
     energy[:] = 0.0
     for r in range(n_lanes):
+        if not active[first + r]:
+            state[r] = _IDLE
+            continue
         si, ti = _robot(s, t, first + r)
         sq[r] = step_begin(si, ti)
         if sq[r] != sq[r]:
@@ -715,6 +723,8 @@ def block_step(s, t, first, status, scratch):
     lanes.energies(x, p)
     for r in range(n_lanes):
         i = first + r
+        if state[r] == _IDLE:
+            continue
         if state[r] == BAD_ACTION:
             status[i] = BAD_ACTION
             continue
