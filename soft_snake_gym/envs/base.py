@@ -317,8 +317,11 @@ class SoftRobotEnv(gym.Env):
         super().reset(seed=seed)
         s = self.settings
         options = dict(options or {})
-        goal = options.pop("goal_direction", s.goal_direction)
-        check_number("reset options.goal_direction", goal)
+        if "goal_direction" in options:
+            goal = options.pop("goal_direction")
+            check_number("reset options.goal_direction", goal)
+        else:
+            goal = s.goal_direction  # checked with the settings
         body_keys = ("x", "v", "kbar", "lbar")
         unknown = sorted(set(options) - set(body_keys))
         if unknown:

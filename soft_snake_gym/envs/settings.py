@@ -7,6 +7,7 @@ explicit keywords combine into one settings object.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -100,9 +101,9 @@ class Randomization:
                     f"[0, {LENGTH_LAG_MAX:g}] s; keep high <= {LENGTH_LAG_MAX:g}"
                 )
 
-    @property
+    @functools.cached_property
     def enabled(self) -> bool:
-        """True if any parameter is randomized."""
+        """True if any parameter is randomized (asked at every reset: computed once)."""
         return any(getattr(self, f.name) is not None for f in dataclasses.fields(self))
 
     def draw(self, rng: np.random.Generator, base: SimConfig) -> tuple[SimConfig, dict[str, float]]:

@@ -120,12 +120,13 @@ def body_from_curvature(
     lbar = np.asarray(lbar, dtype=float)
     if kbar.ndim != 1 or lbar.ndim != 1 or kbar.size != lbar.size - 1:
         raise ValueError(f"kbar has shape {kbar.shape} and lbar {lbar.shape}: need (N-2,) and (N-1,)")
-    theta = np.concatenate(([0.0], np.cumsum(2.0 * np.arctan(kbar / 2.0))))
+    theta = np.zeros(lbar.size)
+    np.cumsum(2.0 * np.arctan(kbar / 2.0), out=theta[1:])
     x = np.zeros((lbar.size + 1, 2))
-    x[1:, 0] = np.cumsum(lbar * np.cos(theta))
-    x[1:, 1] = np.cumsum(lbar * np.sin(theta))
-    chord = x[-1] - x[0]
-    turn = heading - math.atan2(chord[1], chord[0]) if np.hypot(*chord) > 0 else heading
+    np.cumsum(lbar * np.cos(theta), out=x[1:, 0])
+    np.cumsum(lbar * np.sin(theta), out=x[1:, 1])
+    cx, cy = x[-1].tolist()  # the chord, from node 0 at the origin
+    turn = heading - math.atan2(cy, cx) if math.hypot(cx, cy) > 0 else heading
     c, s = math.cos(turn), math.sin(turn)
     x = x @ np.array([[c, s], [-s, c]])
     w = np.ones(x.shape[0])
@@ -137,7 +138,7 @@ def _as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
     arr = np.asarray(value, dtype=np.float64)
     if arr.shape != shape:
         raise ValueError(f"{name} has shape {arr.shape}; expected {shape}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         bad = np.flatnonzero(~np.isfinite(arr.ravel()))
         raise ValueError(f"{name} has non-finite entries at flat indices {bad.tolist()[:8]}")
     return arr
@@ -249,11 +250,11 @@ class Simulator:
         new_k = None if kbar is None else _as_array("kbar", kbar, (N - 2,))
         new_l = None if lbar is None else _as_array("lbar", lbar, (N - 1,))
         new_ldot = None if lbar_dot is None else _as_array("lbar_dot", lbar_dot, (N - 1,))
-        if new_l is not None and np.any(new_l <= 0):
+        if new_l is not None and (new_l <= 0).any():
             raise ValueError(f"lbar must be positive, got min {new_l.min()!r}")
         if new_x is not None:
-            lengths = np.hypot(*np.diff(new_x, axis=0).T)
-            if np.any(lengths <= 0):
+            lengths = np.hypot(*(new_x[1:] - new_x[:-1]).T)
+            if (lengths <= 0).any():
                 raise ValueError(
                     f"x puts nodes {np.flatnonzero(lengths <= 0).tolist()} on top of their "
                     "successors: every edge needs a positive length"
@@ -267,20 +268,8 @@ class Simulator:
             self.arrays.lbar[:] = new_l
         if new_ldot is not None:
             self.arrays.buf[L.B_LRATE, : N - 1] = new_ldot
-        self.arrays.ibuf[L.I_ORDER, : N - 1] = np.argsort(
-            np.minimum(self.arrays.q[0:-2:2], self.arrays.q[2::2]), kind="stable"
-        )
-        self.arrays.ibuf[L.I_FRICTION] = L.SLIDING
-        self.arrays.buf[L.B_V0] = self.arrays.v  # the stepper's predictor starts from the current velocity
-        self.arrays.buf[L.B_QPREV] = np.nan  # no history: BDF2's next step is an SDIRK2 step
         self.failure = None
-        # the energy ledger starts here: energies now, work and dissipation accumulated so far
-        out = self.arrays.out
-        stepper.ledger_energies(tuple(self.arrays))
-        out[L.O_L0_KIN : L.O_L0_E_FRICTION + 1] = out[
-            [L.O_E_KIN, L.O_E_ELASTIC, L.O_T_FLUID, L.O_W_ACT, L.O_E_FLUID, L.O_E_DAMP, L.O_E_FRICTION]
-        ]
-        out[L.O_LEDGER : L.O_LEDGER + L.N_LEDGER] = 0.0
+        stepper.start_from_state(tuple(self.arrays))  # contacts, predictor, history, energy ledger
 
     def set_external_force(self, force=None) -> None:
         """Apply a constant external force to each node, (N, 2) [N]; ``None`` removes it."""

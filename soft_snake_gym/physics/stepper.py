@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from soft_snake_gym.physics import banded, forces, geometry, layout
@@ -56,6 +57,7 @@ from soft_snake_gym.physics.layout import (
     METHOD_BDF2,
     METHOD_SDIRK2,
     METHOD_SYMPLECTIC_EULER,
+    N_LEDGER,
     NON_FINITE,
     NOT_CONVERGED,
     O_E_ACT,
@@ -550,6 +552,31 @@ def ledger_energies(s):
     out[O_E_ELASTIC] = elastic_energy(q, kbar, lbar, prm)
     out[O_T_FLUID] = fluid_kinetic_energy(q, v, prm) if int(prm[P_MEDIUM]) == MEDIUM_WATER else 0.0
     ledger(out)
+
+
+@njit(cache=True, error_model="numpy")
+def start_from_state(s):
+    """What a state written from outside needs before its first step; ``s`` as for :func:`ledger_energies`.
+
+    The edges' order for the self-intersection sweep (by their smaller x, stable), every node
+    sliding, the predictor's start at the current velocity, no BDF2 history (its next step is an
+    SDIRK2 step), and the energy ledger started here: the energies now, with the work and
+    dissipation accumulated so far, as its origin.
+    """
+    ledger_energies(s)
+    s = borrowed_arrays(s)
+    q, v, buf, ibuf, out = s.q, s.v, s.buf, s.ibuf, s.out
+    ne = q.size // 2 - 1
+    keys = np.empty(ne)
+    for e in range(ne):
+        keys[e] = min(q[2 * e], q[2 * e + 2])
+    ibuf[I_ORDER, :ne] = np.argsort(keys, kind="mergesort")
+    ibuf[I_FRICTION, :] = SLIDING
+    buf[B_V0, :] = v
+    buf[B_QPREV, :] = math.nan
+    for k, e in enumerate((O_E_KIN, O_E_ELASTIC, O_T_FLUID, O_W_ACT, O_E_FLUID, O_E_DAMP, O_E_FRICTION)):
+        out[O_L0_KIN + k] = out[e]
+    out[O_LEDGER : O_LEDGER + N_LEDGER] = 0.0
 
 
 @njit(cache=True, inline="always", error_model="numpy")
