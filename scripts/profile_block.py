@@ -102,15 +102,16 @@ def _loop(k, s, t, f0, i0, t0, status, stop):
     """``k`` passes from the saved blocks: cut after part ``stop`` (0: restore only; -1: all of ``block_step``)."""
     scratch = T._block_scratch(s.q.shape[1])
     active = np.ones(status.size, dtype=np.bool_)
+    sb, tb = T._borrowed_stacks(s, t)  # as the batched kernels take them
     for _ in range(k):
         s.f[:] = f0
         s.ibuf[:] = i0
         t.f[:] = t0
         for b in range(status.size // lanes.LANES):
             if stop == -1:
-                T.block_step(active, s, t, b * lanes.LANES, status, scratch)
+                T.block_step(active, sb, tb, b * lanes.LANES, status, scratch)
             elif stop > 0:
-                _cut(s, t, b * lanes.LANES, scratch, stop)
+                _cut(sb, tb, b * lanes.LANES, scratch, stop)
 
 
 def main() -> None:
