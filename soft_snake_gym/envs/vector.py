@@ -122,6 +122,47 @@ def _finish_step(status, stepping, reward, success, on_success, elapsed, returns
     return terminated, truncated, failures
 
 
+@njit(cache=True)
+def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, h):
+    """The arrays a batched ``info`` is made of, in one compiled pass (see :func:`_start_step`).
+
+    ``rows`` (the task state ``rs`` transposed: row k over robots), ``terms`` (``rows`` with the
+    reward terms and metrics, rows ``R_FWD`` on, zero where a robot did not step; ``rows`` itself
+    if all stepped), the simulated ``time`` [s], Newton iterations and rest ``shape`` (those of
+    the last valid state where a stepped robot ``failed``), ``failed``, and the energy ledger
+    (N_LEDGER, n), zero where a robot did not step.
+    """
+    n, k = rs.shape
+    rows = np.empty((k, n))
+    time_s = np.empty(n)
+    niter = np.empty(n, dtype=np.int64)
+    shape_out = np.empty_like(shape)
+    failed = np.zeros(n, dtype=np.bool_)
+    ledger = np.zeros((N_LEDGER, n))
+    all_stepped = True
+    for i in range(n):
+        all_stepped &= stepped[i]
+        failed[i] = stepped[i] and status[i] != OK
+        if failed[i]:
+            steps, it, shape_out[i] = prev[i, 0], prev[i, 1], prev_shape[i]
+        else:
+            steps, it, shape_out[i] = out[i, O_NSTEPS], out[i, O_NITER], shape[i]
+        time_s[i] = steps * h[i]
+        niter[i] = int(it)
+        for r in range(k):
+            rows[r, i] = rs[i, r]
+        if stepped[i]:
+            for r in range(N_LEDGER):
+                ledger[r, i] = out[i, O_LEDGER + r]
+    terms = rows
+    if not all_stepped:
+        terms = rows.copy()
+        for i in range(n):
+            if not stepped[i]:
+                terms[T.R_FWD :, i] = 0.0
+    return rows, terms, time_s, niter, shape_out, failed, ledger
+
+
 @dataclass(frozen=True)
 class RobotBatch:
     """The arrays of ``n`` robots stacked on a leading axis, as the batched step takes them.
@@ -463,16 +504,17 @@ class SoftVectorEnv(VectorEnv):
         any_stepped = bool(stepped.any())
         if not present.any():
             return infos
-        out = self.batch.sim.out
-        rows = self.batch.task.rs.T.copy()  # one gather: row k is rs[:, k] over robots
-        nsteps, niter, shape = out[:, O_NSTEPS].copy(), out[:, O_NITER].copy(), self._shape.copy()
-        failed = stepped & (self._status != OK)
-        if failed.any():  # the last valid state, as the single env reports it
-            nsteps[failed] = self._prev[failed, 0]
-            niter[failed] = self._prev[failed, 1]
-            shape[failed] = self._prev_shape[failed]
-        time_s = nsteps * self.batch.sim.prm[:, P_H]
-        state = self._proto.state_info(rows, time_s, shape, niter.astype(np.int64), self.batch.task.raw)
+        rows, terms, time_s, niter, shape, failed, ledger = _info_rows(
+            self.batch.task.rs,
+            self.batch.sim.out,
+            self._shape,
+            self._prev,
+            self._prev_shape,
+            self._status,
+            stepped,
+            self.batch.sim.prm[:, P_H],
+        )  # a robot whose step failed reports its last valid state, as the single env does
+        state = self._proto.state_info(rows, time_s, shape, niter, self.batch.task.raw)
         all_present = bool(present.all())
         if not all_present:
             hidden = ~present
@@ -486,20 +528,14 @@ class SoftVectorEnv(VectorEnv):
             failure[i] = STATUS_REASONS[self._status[i]]
         infos["failure"], infos["_failure"] = failure, mask
         if any_stepped:
-            if not stepped.all():  # a new array: the state entries are views of the rows
-                rows = rows.copy()
-                rows[T.R_FWD :, ~stepped] = 0.0
             mask = stepped.copy()
-            for key, value in T.reward_terms(rows, self._proto.term_keys).items():
+            for key, value in T.reward_terms(terms, self._proto.term_keys).items():
                 infos[key], infos[f"_{key}"] = value, mask
             metrics: dict[str, Any] = {}
-            for key, value in T.episode_metrics(rows, self.metric_keys).items():
+            for key, value in T.episode_metrics(terms, self.metric_keys).items():
                 metrics[key], metrics[f"_{key}"] = value, mask
             infos["metrics"], infos["_metrics"] = metrics, mask
             energy: dict[str, Any] = {}
-            ledger = np.ascontiguousarray(out[:, O_LEDGER : O_LEDGER + N_LEDGER].T)
-            if not stepped.all():
-                ledger[:, ~stepped] = 0.0
             for key, value in zip(LEDGER_KEYS, ledger, strict=True):
                 energy[key], energy[f"_{key}"] = value, mask
             infos["energy"], infos["_energy"] = energy, mask
