@@ -548,7 +548,7 @@ def robot_step_blocks(sf, ibuf, tf, obs, n_act, n_path):
 
 @njit(cache=True, inline="always")
 def _borrowed_stacks(s, t):
-    """The batch's stacked arrays, plain tuples as the batched kernels take them, :func:`~L.borrowed`.
+    """The batch's stacked arrays (the plain tuples the batched kernels take), each ``layout.borrowed``.
 
     A view of one robot's rows then pays no reference counting: :func:`_robot` took 330 ns a
     call on counted stacks, not inlined, and 67 ns inlined on borrowed ones.
@@ -681,13 +681,14 @@ def block_step(active, s, t, first, status, scratch):
     """:func:`robot_step` for the ``active`` robots of the ``LANES`` from ``first``, each SDIRK2 stage at once.
 
     Every robot must be :func:`block_eligible`, with the same ``h`` and sub-steps; ``scratch`` is
-    :func:`_block_scratch`'s. An inactive robot's lane idles: the block computes it, as a lane whose
-    action is bad, and nothing of it is put back, as :func:`batch_step` leaves that robot alone. It is :func:`robot_step` with ``stepper.simulate``'s step of SDIRK2
+    :func:`_block_scratch`'s. It is :func:`robot_step` with ``stepper.simulate``'s step of SDIRK2
     sub-steps written out: each robot's task start and end and the step's end are the same
     functions, the stages run in the block (``lanes.stage_start``, ``lanes.newton``,
     ``lanes.stage_end``) in the scalar kernels' order of operations, and the sums are
     ``simulate``'s, so every robot ends bit for bit as :func:`robot_step` leaves it. A robot
-    whose step fails is put back at once; the others after their last stage.
+    whose step fails is put back at once; the others after their last stage. An inactive robot's
+    lane idles: the block computes it as it does a lane whose action is bad, and puts nothing of
+    it back (:func:`batch_step` leaves that robot alone).
     """
     n_lanes = lanes.LANES
     x, p, result, sq, before, state, iters, acc, niter, resid, energy, go, ran = scratch
