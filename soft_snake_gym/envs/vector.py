@@ -123,14 +123,28 @@ def _finish_step(status, stepping, reward, success, on_success, elapsed, returns
 
 
 @njit(cache=True)
-def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, h):
+def _step_outputs(stepping, reward, terminated, truncated):
+    """A step's rewards (0 for a robot not stepped), its episode ends, and whether any episode ended."""
+    n = stepping.size
+    rewards = np.zeros(n)
+    dones = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        if stepping[i]:
+            rewards[i] = reward[i]
+        dones[i] = terminated[i] or truncated[i]
+    return rewards, dones, dones.any()
+
+
+@njit(cache=True)
+def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, reset, h):
     """The arrays a batched ``info`` is made of, in one compiled pass (see :func:`_start_step`).
 
     ``rows`` (the task state ``rs`` transposed: row k over robots), ``terms`` (``rows`` with the
     reward terms and metrics, rows ``R_FWD`` on, zero where a robot did not step; ``rows`` itself
     if all stepped), the simulated ``time`` [s], Newton iterations and rest ``shape`` (those of
-    the last valid state where a stepped robot ``failed``), ``failed``, and the energy ledger
-    (N_LEDGER, n), zero where a robot did not step.
+    the last valid state where a stepped robot ``failed``), ``failed``, the energy ledger
+    (N_LEDGER, n), zero where a robot did not step, and whether any robot ``stepped``, all of them
+    were ``stepped`` or ``reset``, any was ``reset``, and how many ``failed``.
     """
     n, k = rs.shape
     rows = np.empty((k, n))
@@ -139,20 +153,31 @@ def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, h):
     shape_out = np.empty_like(shape)
     failed = np.zeros(n, dtype=np.bool_)
     ledger = np.zeros((N_LEDGER, n))
-    all_stepped = True
+    all_stepped = all_present = True
+    any_stepped = any_reset = False
+    n_failed = 0
+    m = shape.shape[1]
     for i in range(n):
         all_stepped &= stepped[i]
+        any_stepped |= stepped[i]
+        all_present &= stepped[i] or reset[i]
+        any_reset |= reset[i]
         failed[i] = stepped[i] and status[i] != OK
+        n_failed += failed[i]
         if failed[i]:
-            steps, it, shape_out[i] = prev[i, 0], prev[i, 1], prev_shape[i]
+            steps, it, src = prev[i, 0], prev[i, 1], prev_shape
         else:
-            steps, it, shape_out[i] = out[i, O_NSTEPS], out[i, O_NITER], shape[i]
+            steps, it, src = out[i, O_NSTEPS], out[i, O_NITER], shape
         time_s[i] = steps * h[i]
         niter[i] = int(it)
-        for r in range(k):
+        for j in range(m):
+            shape_out[i, j] = src[i, j]
+    for r in range(k):  # row by row: the writes run along a row (2 KB apart robot by robot)
+        for i in range(n):
             rows[r, i] = rs[i, r]
-        if stepped[i]:
-            for r in range(N_LEDGER):
+    for r in range(N_LEDGER):
+        for i in range(n):
+            if stepped[i]:
                 ledger[r, i] = out[i, O_LEDGER + r]
     terms = rows
     if not all_stepped:
@@ -160,7 +185,8 @@ def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, h):
         for i in range(n):
             if not stepped[i]:
                 terms[T.R_FWD :, i] = 0.0
-    return rows, terms, time_s, niter, shape_out, failed, ledger
+    flags = (any_stepped, all_stepped, all_present, any_reset, n_failed)
+    return rows, terms, time_s, niter, shape_out, failed, ledger, flags
 
 
 @dataclass(frozen=True)
@@ -354,9 +380,7 @@ class SoftVectorEnv(VectorEnv):
         resetting = none if same_step else self._autoreset
         stepping = ~resetting
         terminated, truncated = self.advance(actions, stepping)
-        rewards = np.where(stepping, self.rewards, 0.0)
-        dones = terminated | truncated
-        any_done = bool(dones.any())
+        rewards, dones, any_done = _step_outputs(stepping, self.rewards, terminated, truncated)
         stats = self.episode_stats(dones) if any_done else None
         infos: dict[str, Any] = {}
         if same_step and any_done:
@@ -500,11 +524,7 @@ class SoftVectorEnv(VectorEnv):
         """
         n = self.num_envs
         infos: dict[str, Any] = {}
-        present = stepped | reset
-        any_stepped = bool(stepped.any())
-        if not present.any():
-            return infos
-        rows, terms, time_s, niter, shape, failed, ledger = _info_rows(
+        rows, terms, time_s, niter, shape, failed, ledger, flags = _info_rows(
             self.batch.task.rs,
             self.batch.sim.out,
             self._shape,
@@ -512,20 +532,25 @@ class SoftVectorEnv(VectorEnv):
             self._prev_shape,
             self._status,
             stepped,
+            reset,
             self.batch.sim.prm[:, P_H],
         )  # a robot whose step failed reports its last valid state, as the single env does
+        any_stepped, _, all_present, any_reset, n_failed = flags
+        if not (any_stepped or any_reset):
+            return infos
         state = self._proto.state_info(rows, time_s, shape, niter, self.batch.task.raw)
-        all_present = bool(present.all())
+        # one mask array per group of keys (read-only by convention)
+        mask = np.ones(n, dtype=np.bool_) if all_present else stepped | reset
         if not all_present:
-            hidden = ~present
+            hidden = ~mask
             for value in state.values():
                 value[hidden] = 0
-        mask = present.copy()  # one mask array per group of keys (read-only by convention)
         for key, value in state.items():
             infos[key], infos[f"_{key}"] = value, mask
         failure = np.full(n, None, dtype=object)
-        for i in np.flatnonzero(failed):
-            failure[i] = STATUS_REASONS[self._status[i]]
+        if n_failed:
+            for i in np.flatnonzero(failed):
+                failure[i] = STATUS_REASONS[self._status[i]]
         infos["failure"], infos["_failure"] = failure, mask
         if any_stepped:
             mask = stepped.copy()
@@ -539,7 +564,7 @@ class SoftVectorEnv(VectorEnv):
             for key, value in zip(LEDGER_KEYS, ledger, strict=True):
                 energy[key], energy[f"_{key}"] = value, mask
             infos["energy"], infos["_energy"] = energy, mask
-        if reset.any():
+        if any_reset:
             randomized: dict[str, Any] = {}
             for i, info in zip(np.flatnonzero(reset), reset_infos, strict=True):
                 for key, value in info["randomized"].items():
