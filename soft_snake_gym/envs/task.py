@@ -642,9 +642,7 @@ def _step_unit(active, s, t, status, u, scratch):
 @njit(cache=True, error_model="numpy")
 def _step_block(active, s, t, status, first, scratch):
     """Robots ``first`` .. ``first + LANES - 1``: by :func:`block_step` if it takes them all, else one by one."""
-    together = False  # a robot to step, and all of them eligible alike
-    for r in range(lanes.LANES):
-        together |= active[first + r]
+    together = active[first : first + lanes.LANES].any()  # a robot to step, and all eligible alike
     for r in range(lanes.LANES):
         i = first + r
         together &= block_eligible(s.prm[i], t.tp[i])

@@ -185,7 +185,7 @@ def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, reset, h):
         for i in range(n):
             if not stepped[i]:
                 terms[T.R_FWD :, i] = 0.0
-    flags = (any_stepped, all_stepped, all_present, any_reset, n_failed)
+    flags = (any_stepped, all_present, any_reset, n_failed)
     return rows, terms, time_s, niter, shape_out, failed, ledger, flags
 
 
@@ -535,7 +535,7 @@ class SoftVectorEnv(VectorEnv):
             reset,
             self.batch.sim.prm[:, P_H],
         )  # a robot whose step failed reports its last valid state, as the single env does
-        any_stepped, _, all_present, any_reset, n_failed = flags
+        any_stepped, all_present, any_reset, n_failed = flags
         if not (any_stepped or any_reset):
             return infos
         state = self._proto.state_info(rows, time_s, shape, niter, self.batch.task.raw)

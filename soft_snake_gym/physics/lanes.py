@@ -6,8 +6,9 @@ the whole block with each robot in one lane of the CPU's vector registers: the s
 (:func:`stage_start`), its Newton solve (:func:`newton`: the residual with its Jacobian, the
 banded factorization and the solves), its end (:func:`stage_end`: the powers, and the
 curvatures for the observation), then the energies (:func:`energies`). :func:`take` copies the
-robots into a :class:`Block` once a step and :func:`put` copies them back. LLVM vectorizes a loop over the lanes only in one form, found with
-``scripts/probe_soa.py`` (docs/performance.md, "Sixteen lanes"):
+robots into a :class:`Block` once a step and :func:`put` copies them back. LLVM vectorizes a
+loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/performance.md,
+"Sixteen lanes"):
 
 - every array of the block is flat, element ``i`` of lane ``r`` at ``i * LANES + r`` (a band
   entry (row, col) at ``(row * WIDTH + col) * LANES + r``), strides that are compile-time
@@ -612,8 +613,9 @@ def stage_end(x, p, stage):
 
     The step's start velocity back in ``v0`` after stage 1, the edge geometry of ``q`` into ``E``,
     ``forces.actuator_power`` into ``power[0]`` and ``forces.damping_power`` into ``power[1]``,
-    in their order of operations; on the way, the curvatures and their rates into ``x.curv``. The damping terms are summed for every lane, a zero added in
-    place of a term where ``damping_power`` skips it.
+    in their order of operations; on the way, the curvatures and their rates into ``x.curv``.
+    The damping terms are summed for every lane, a zero added in place of a term where
+    ``damping_power`` skips it.
     """
     q, v, E, kbar, lbar, uk, lrate, power = x.q, x.v, x.E, x.kbar, x.lbar, x.uk, x.lrate, x.power
     n2 = q.size // LANES
