@@ -14,6 +14,7 @@ import pytest
 from soft_snake_gym import Integrator, Rod, SimConfig, SimulationError, Simulator, body_from_curvature
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.physics import allocate_arrays
+from soft_snake_gym.physics.layout import B_FEXT, B_LRATE
 
 
 def test_body_from_curvature_puts_the_head_ahead_along_plus_x():
@@ -145,6 +146,37 @@ def test_bad_state_raises_clear_errors():
         sim.set_state(x=np.zeros((10, 2)))
     with pytest.raises(ValueError, match="N = 10"):
         sim.set_config(SimConfig(rod=Rod(N=12)))
+
+
+def test_reset_and_start_forget_the_last_episode():
+    """A used simulator, reset or started (the envs' reset, unchecked), runs as a new one.
+
+    The used ones stepped under length rates with an external force, so their records, force and
+    rates are not zero; the new one is given the same state by ``set_state``. All three then run
+    the same steps to the same bits, the records (time, energies, ledger, Newton counts) included.
+    """
+    rng = np.random.default_rng(4)
+    kbar, lbar = rng.uniform(-0.5, 0.5, 8), rng.uniform(0.08, 0.12, 9)
+    x = body_from_curvature(kbar, lbar, heading=0.3, com=(0.2, -0.1))
+    v = rng.uniform(-0.01, 0.01, (10, 2))
+    config = SimConfig(medium="ground", rod=Rod(length_lag=0.05))
+    sims = [Simulator(config) for _ in range(3)]
+    sims[0].set_state(x=x, v=v, kbar=kbar, lbar=lbar)
+    for sim, how in zip(sims[1:], ("reset", "start"), strict=True):
+        sim.set_external_force(np.full((10, 2), 0.01))
+        for _ in range(5):
+            sim.step(u_k=np.full(8, 0.3), u_l=np.full(9, 0.02))
+        assert sim.arrays.out.any() and sim.arrays.buf[B_LRATE].any()
+        getattr(sim, how)(x=x, v=v, kbar=kbar, lbar=lbar)
+    for _ in range(20):
+        for sim in sims:
+            sim.step(u_k=np.full(8, -0.2), u_l=np.full(9, 0.01))
+    for sim in sims[1:]:
+        for name in ("q", "v", "kbar", "lbar", "out"):
+            assert np.array_equal(getattr(sim.arrays, name), getattr(sims[0].arrays, name)), name
+        assert not sim.arrays.buf[B_FEXT].any()
+    with pytest.raises(ValueError, match="lbar must be positive"):
+        sims[1].reset(x=x, lbar=-lbar)
 
 
 def test_self_intersection_is_reported_and_stops_the_simulation():

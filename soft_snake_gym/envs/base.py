@@ -232,6 +232,10 @@ class SoftRobotEnv(gym.Env):
         raise NotImplementedError
 
     def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """The episode's body when ``reset`` is given none: ``x``, ``v``, ``kbar``, ``lbar``.
+
+        As ``Simulator.start`` takes them, which checks nothing: built right by the env.
+        """
         raise NotImplementedError
 
     def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
@@ -338,9 +342,9 @@ class SoftRobotEnv(gym.Env):
         if options:
             body = {k: np.asarray(v, dtype=np.float64) for k, v in options.items()}
             self._check_options(body)
+            self.sim.reset(**body)  # checks the body, fills in its missing parts
         else:
-            body = self._initial_body(self.np_random)
-        self.sim.reset(**body)
+            self.sim.start(**self._initial_body(self.np_random))
         self._reset_task(self.np_random)
 
         self._failure = None

@@ -136,6 +136,19 @@ def _step_outputs(stepping, reward, terminated, truncated):
 
 
 @njit(cache=True)
+def _episode_stats(dones, returns, elapsed, starts, now):
+    """Return, length and wall-clock seconds (to the microsecond) of the episodes that end, 0 elsewhere."""
+    n = dones.size
+    r = np.zeros(n)
+    l = np.zeros(n, dtype=np.int64)
+    t = np.zeros(n)
+    for i in range(n):
+        if dones[i]:
+            r[i], l[i], t[i] = returns[i], elapsed[i], np.round(now - starts[i], 6)
+    return r, l, t
+
+
+@njit(cache=True)
 def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, reset, h):
     """The arrays a batched ``info`` is made of, in one compiled pass (see :func:`_start_step`).
 
@@ -509,12 +522,8 @@ class SoftVectorEnv(VectorEnv):
 
         (n,) each, zero where ``dones`` is False (as ``RecordEpisodeStatistics``).
         """
-        now = time.perf_counter()
-        return {
-            "r": np.where(dones, self._returns, 0.0),
-            "l": np.where(dones, self._elapsed, 0),
-            "t": np.where(dones, np.round(now - self._starts, 6), 0.0),
-        }
+        r, l, t = _episode_stats(dones, self._returns, self._elapsed, self._starts, time.perf_counter())
+        return {"r": r, "l": l, "t": t}
 
     def infos(self, stepped: np.ndarray, reset: np.ndarray, reset_infos: list[dict]) -> dict[str, Any]:
         """Infos of robots that ``stepped`` and were ``reset``, with Gymnasium's ``_key`` masks.

@@ -225,51 +225,64 @@ class Simulator:
         By default a straight body at rest along +x, centre of mass at the origin, rest shape
         straight with the configured edge length; clears accumulated energies, time and any failure.
         """
-        rod = self.config.rod
-        self.arrays.kbar[:] = 0.0
-        self.arrays.lbar[:] = rod.edge_length
-        if x is None:
-            x = body_from_curvature(
-                self.arrays.kbar if kbar is None else kbar, self.arrays.lbar if lbar is None else lbar
-            )
-        self.arrays.q[:] = 0.0
-        self.arrays.v[:] = 0.0
-        self.arrays.out[:] = 0.0
-        self.arrays.buf[L.B_FEXT] = 0.0
-        self.arrays.buf[L.B_LRATE] = 0.0
-        self.set_state(x=x, v=v, kbar=kbar, lbar=lbar)
+        x, v, kbar, lbar, _ = self._checked(x, v, kbar, lbar)
+        N = self.N
+        kbar = np.zeros(N - 2) if kbar is None else kbar
+        lbar = np.full(N - 1, self.config.rod.edge_length) if lbar is None else lbar
+        x = body_from_curvature(kbar, lbar) if x is None else x
+        self.start(x, np.zeros((N, 2)) if v is None else v, kbar, lbar)
+
+    def start(self, x: np.ndarray, v: np.ndarray, kbar: np.ndarray, lbar: np.ndarray) -> None:
+        """:meth:`reset` to a whole state its caller built and checked, in one compiled call.
+
+        ``x``, ``v`` (N, 2), ``kbar`` (N-2,), ``lbar`` (N-1,): C-contiguous float64, finite, every
+        rest and node-to-node length positive, as the envs' reset bodies are. Nothing is checked
+        here; :meth:`reset` checks what it is given, then calls this.
+        """
+        stepper.restart(tuple(self.arrays), x, v, kbar, lbar)
+        self.failure = None
 
     def set_state(self, x=None, v=None, kbar=None, lbar=None, lbar_dot=None) -> None:
         """Overwrite any part of the state; the others are kept. Clears a failure.
 
         ``lbar_dot`` (N-1,) [m/s] sets the length actuators' rates (the state of their lag).
         """
+        x, v, kbar, lbar, lbar_dot = self._checked(x, v, kbar, lbar, lbar_dot)
+        if x is not None:
+            self.arrays.q[:] = x.ravel()
+        if v is not None:
+            self.arrays.v[:] = v.ravel()
+        if kbar is not None:
+            self.arrays.kbar[:] = kbar
+        if lbar is not None:
+            self.arrays.lbar[:] = lbar
+        if lbar_dot is not None:
+            self.arrays.buf[L.B_LRATE, : self.N - 1] = lbar_dot
+        self.failure = None
+        stepper.start_from_state(tuple(self.arrays))  # contacts, predictor, history, energy ledger
+
+    def _checked(self, x, v, kbar, lbar, lbar_dot=None) -> tuple[np.ndarray | None, ...]:
+        """The given parts of a state as float64 arrays of their shapes, finite; None stays None.
+
+        Raises ``ValueError`` for a wrong shape, a non-finite entry, a non-positive rest length
+        or two successive nodes at the same place.
+        """
         N = self.N
-        new_x = None if x is None else _as_array("x", x, (N, 2))
-        new_v = None if v is None else _as_array("v", v, (N, 2))
-        new_k = None if kbar is None else _as_array("kbar", kbar, (N - 2,))
-        new_l = None if lbar is None else _as_array("lbar", lbar, (N - 1,))
-        new_ldot = None if lbar_dot is None else _as_array("lbar_dot", lbar_dot, (N - 1,))
-        if new_l is not None and (new_l <= 0).any():
-            raise ValueError(f"lbar must be positive, got min {new_l.min()!r}")
-        if new_x is not None:
-            lengths = np.hypot(*(new_x[1:] - new_x[:-1]).T)
+        x = None if x is None else _as_array("x", x, (N, 2))
+        v = None if v is None else _as_array("v", v, (N, 2))
+        kbar = None if kbar is None else _as_array("kbar", kbar, (N - 2,))
+        lbar = None if lbar is None else _as_array("lbar", lbar, (N - 1,))
+        lbar_dot = None if lbar_dot is None else _as_array("lbar_dot", lbar_dot, (N - 1,))
+        if lbar is not None and (lbar <= 0).any():
+            raise ValueError(f"lbar must be positive, got min {lbar.min()!r}")
+        if x is not None:
+            lengths = np.hypot(*(x[1:] - x[:-1]).T)
             if (lengths <= 0).any():
                 raise ValueError(
                     f"x puts nodes {np.flatnonzero(lengths <= 0).tolist()} on top of their "
                     "successors: every edge needs a positive length"
                 )
-            self.arrays.q[:] = new_x.ravel()
-        if new_v is not None:
-            self.arrays.v[:] = new_v.ravel()
-        if new_k is not None:
-            self.arrays.kbar[:] = new_k
-        if new_l is not None:
-            self.arrays.lbar[:] = new_l
-        if new_ldot is not None:
-            self.arrays.buf[L.B_LRATE, : N - 1] = new_ldot
-        self.failure = None
-        stepper.start_from_state(tuple(self.arrays))  # contacts, predictor, history, energy ledger
+        return x, v, kbar, lbar, lbar_dot
 
     def set_external_force(self, force=None) -> None:
         """Apply a constant external force to each node, (N, 2) [N]; ``None`` removes it."""

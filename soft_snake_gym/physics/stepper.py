@@ -579,6 +579,24 @@ def start_from_state(s):
     out[O_LEDGER : O_LEDGER + N_LEDGER] = 0.0
 
 
+@njit(cache=True, error_model="numpy")
+def restart(s, x, v, kbar, lbar):
+    """``Simulator.start``: the state ``x``, ``v`` (N, 2), ``kbar``, ``lbar`` written, then :func:`start_from_state`.
+
+    Clears ``out`` (time, energies, counts), the external force and the length rates first.
+    """
+    a = borrowed_arrays(s)
+    a.out[:] = 0.0
+    a.buf[B_FEXT, :] = 0.0
+    a.buf[B_LRATE, :] = 0.0
+    for i in range(x.shape[0]):
+        a.q[2 * i], a.q[2 * i + 1] = x[i, 0], x[i, 1]
+        a.v[2 * i], a.v[2 * i + 1] = v[i, 0], v[i, 1]
+    a.kbar[:] = kbar
+    a.lbar[:] = lbar
+    start_from_state(s)
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def ledger(out):
     """The energy ledger into ``out[O_LEDGER:]`` from the energies in ``out`` (:func:`ledger_energies`).
