@@ -416,6 +416,7 @@ def _be_newton(s, dt, medium):
     factored = False  # J holds the factors of an earlier iterate's Jacobian (a chord step)
     fused = medium == MEDIUM_GROUND  # see the line search
     chord_rate = prm[P_CHORD]  # Integrator.newton_chord_rate
+    searched_it = -1  # the last pass iteration whose full step the line search cut
     while True:
         if rmax <= tol:
             # stick-slip decided by the end of the step (docs/model.md §5): if a contact changes,
@@ -450,9 +451,11 @@ def _be_newton(s, dt, medium):
         # Jacobian) that does not descend at full length is not searched: the Jacobian is
         # renewed. On the ground a contact pass takes several iterations, so the full step's
         # trial assembles the Jacobian too and, accepted, serves the next iteration; not once
-        # rmax^2 <= tol, where Newton's quadratic convergence makes it the pass's last iterate
+        # rmax^2 <= tol, where Newton's quadratic convergence makes it the pass's last iterate,
+        # nor right after an iteration whose full step was cut: the next one is cut too (98 % of
+        # them under random actions), and its Jacobian would go unused
         step = 1.0
-        renew = fused and rmax * rmax > tol
+        renew = fused and rmax * rmax > tol and searched_it != pass_it - 1
         for _ in range(12):
             for i in range(n):
                 v[i] = vacc[i] + step * dv[i]
@@ -461,6 +464,8 @@ def _be_newton(s, dt, medium):
                 break
             step *= 0.5
         rmax_prev = rmax
+        if step < 1.0:
+            searched_it = pass_it
         if chord and not trial[0] < norm2 * (1.0 - 1e-4):
             for i in range(n):
                 v[i] = vacc[i]
