@@ -452,8 +452,8 @@ def _be_newton(s, dt, medium):
         # renewed. On the ground a contact pass takes several iterations, so the full step's
         # trial assembles the Jacobian too and, accepted, serves the next iteration; not once
         # rmax^2 <= tol, where Newton's quadratic convergence makes it the pass's last iterate,
-        # nor right after an iteration whose full step was cut: the next one is cut too (98 % of
-        # them under random actions), and its Jacobian would go unused
+        # nor right after an iteration whose full step was cut: that Jacobian goes unused (the
+        # step cut again, or converged) 98 % of the time under random actions
         step = 1.0
         renew = fused and rmax * rmax > tol and searched_it != pass_it - 1
         for _ in range(12):
