@@ -13,8 +13,8 @@ import pytest
 
 from soft_snake_gym import Integrator, Rod, SimConfig, SimulationError, Simulator, body_from_curvature
 from soft_snake_gym.envs import task as T
-from soft_snake_gym.physics import allocate_arrays
-from soft_snake_gym.physics.layout import B_FEXT, B_LRATE
+from soft_snake_gym.physics import allocate_arrays, stepper
+from soft_snake_gym.physics.layout import B_FEXT, B_LRATE, B_R, I_FRICTION, SLIDING, STUCK, sim_views
 
 
 def test_body_from_curvature_puts_the_head_ahead_along_plus_x():
@@ -279,6 +279,32 @@ def test_newton_work_counts_the_jacobians_residuals_and_factorizations_of_each_s
     sim = Simulator(SimConfig(integrator=Integrator(method="symplectic_euler")))
     sim.reset(x=start)
     assert not _work(sim, inputs[:3]).any()
+
+
+@pytest.mark.parametrize("medium", ["ground", "water"])
+def test_a_residual_is_the_same_bits_with_or_without_its_jacobian(medium):
+    """What lets Newton choose when to assemble a Jacobian without moving a digit of the answer.
+
+    On the ground the full step's trial assembles it or not by a rule (not right after a cut
+    full step); in water the trials never do, and an accepted iterate's residual is computed
+    again with it. Either way the residual, powers and position must not depend on the choice.
+    """
+    rng = np.random.default_rng(5)
+    sim = Simulator(SimConfig(medium=medium))
+    sim.reset(x=body_from_curvature(np.full(8, 0.3), sim.lbar))
+    for _ in range(30):
+        assert sim.step(u_k=rng.uniform(-3, 3, 8), u_l=rng.uniform(-0.05, 0.05, 9)), sim.failure
+    s = sim_views(sim.arrays.f, sim.arrays.ibuf)
+    code = stepper.MEDIUM_GROUND if medium == "ground" else stepper.MEDIUM_WATER
+    stepper._be_start(s, code, 1.0)
+    if medium == "ground":
+        assert set(s.ibuf[I_FRICTION, : sim.N].tolist()) == {SLIDING, STUCK}  # both laws in play
+    s.v[:] += rng.uniform(-0.01, 0.01, s.v.size)  # an iterate off the solution
+    results = []
+    for jac in (False, True, False):
+        results.append((stepper._be_residual(s, sim.h, code, jac), s.buf[B_R].copy(), s.q.copy()))
+    for r, R, q in results[1:]:
+        assert r == results[0][0] and np.array_equal(R, results[0][1]) and np.array_equal(q, results[0][2])
 
 
 def test_the_kernels_run_as_python_with_numba_disabled_and_agree_with_the_compiled_ones():
