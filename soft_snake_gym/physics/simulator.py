@@ -135,13 +135,14 @@ def body_from_curvature(
 
 
 def _as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as a C-contiguous float64 array of ``shape``, finite (the kernels' and ``start``'s inputs)."""
     arr = np.asarray(value, dtype=np.float64)
     if arr.shape != shape:
         raise ValueError(f"{name} has shape {arr.shape}; expected {shape}")
     if not np.isfinite(arr).all():
         bad = np.flatnonzero(~np.isfinite(arr.ravel()))
         raise ValueError(f"{name} has non-finite entries at flat indices {bad.tolist()[:8]}")
-    return arr
+    return np.ascontiguousarray(arr)
 
 
 class Simulator:
