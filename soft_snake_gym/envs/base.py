@@ -67,7 +67,7 @@ class SoftRobotEnv(gym.Env):
 
     Subclasses set ``medium``, ``settings_class``, ``env_id``, ``medium_energy_key``,
     ``medium_power_key``, ``shape_key`` and implement the hooks ``_setup_task``,
-    ``_build_spaces``, ``_action_params``, ``_initial_body``, ``_shape_info`` and
+    ``_build_spaces``, ``_action_params``, ``_initial_body``, ``_shape_views`` and
     ``_check_options``.
 
     Attributes:
@@ -98,6 +98,8 @@ class SoftRobotEnv(gym.Env):
     medium_power_key: ClassVar[str] = "fluid_power"
     shape_key: ClassVar[str] = "kbar"
     """The rest shape the actions drive (``"kbar"`` or ``"lbar"``), a state entry of ``info``."""
+    shape_flags: ClassVar[tuple[str, ...]] = ()
+    """Entries of :meth:`_shape_views` held as 0.0 or 1.0 and given in ``info`` as bool arrays."""
     trail_length: ClassVar[int] = 300
     view_lengths: ClassVar[float] = 2.0
     """Width of the rendered view, in body lengths."""
@@ -211,10 +213,22 @@ class SoftRobotEnv(gym.Env):
         a, task = self.sim.arrays, self.task
         self._kernel_args = (a.f, a.ibuf, task.f, task.obs, task.act.shape[-1], task.path.shape[-2])
         self._out, self._shape = a.out, getattr(a, self.shape_key)
+        views = self._shape_views(task.raw, self._shape)
+        self._own_views = tuple(views.values())  # this robot's, sliced once: a slice costs 0.1 µs
+        self._copy_shape = _compile_display(
+            "v",
+            ", ".join(
+                f"{key!r}: v[{i}].astype(bool)" if key in self.shape_flags else f"{key!r}: v[{i}].copy()"
+                for i, key in enumerate(views)
+            ),
+        )
         state, rest = self._info_displays()
         self._state_of = _compile_display("r, time, shape, niter", state)
         self._rest_of = _compile_display("r, out, failure", rest)
-        self._info_of = _compile_display("out, failure, r, time, shape, niter", f"{state}, {rest}")
+        # this robot's: the time and the iterations straight from ``out`` (one call less a step)
+        own, _ = self._info_displays(time=f"out[{O_NSTEPS}] * h", niter=f"int(out[{O_NITER}])")
+        self._own_state_of = _compile_display("r, out, shape, h", own)
+        self._info_of = _compile_display("out, failure, r, shape, h", f"{own}, {rest}")
 
     # --- hooks ------------------------------------------------------------------------------
     def _setup_task(self) -> None:
@@ -238,20 +252,25 @@ class SoftRobotEnv(gym.Env):
         """
         raise NotImplementedError
 
-    def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
-        """The body's entries of ``info`` (new arrays).
+    def _shape_views(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, np.ndarray]:
+        """The body's entries of ``info``, as views in their order (``info`` holds copies).
 
-        From the unclipped observation ``raw`` and the driven rest shape ``shape``; (n_obs,) for one
-        robot or (n, n_obs) for a batch.
+        Of the unclipped observation ``raw`` and the driven rest shape ``shape``; (n_obs,) for one
+        robot or (n, n_obs) for a batch. Entries named in ``shape_flags`` are given as bool.
         """
         raise NotImplementedError
 
+    def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
+        """The body's entries of ``info``: :meth:`_shape_views`, copied (new arrays)."""
+        return self._copy_shape(tuple(self._shape_views(raw, shape).values()))
+
     # --- info: the one place it is built (the vector env calls these too) -------------------
-    def _info_displays(self) -> tuple[str, str]:
+    def _info_displays(self, time: str = "time", niter: str = "niter") -> tuple[str, str]:
         """The entries of ``info`` as the bodies of two dict displays, in their order.
 
         The state entries over ``r`` (the task state ``rs``), ``time``, ``shape`` (the dict of
-        :meth:`_shape_info`) and ``niter``; the rest over ``r``, ``out`` (the simulator's ``out``)
+        :meth:`_shape_info`) and ``niter`` (or the expressions given for the time and the
+        iterations); the rest over ``r``, ``out`` (the simulator's ``out``)
         and ``failure``: the reward terms (``task.reward_terms``), the running metrics
         (``task.episode_metrics``) and the energy ledger (``layout.energy_ledger``), from the same
         keys and indices. ``r`` and ``out`` are lists for one robot; ``r`` may be the rows ``rs.T``
@@ -259,8 +278,8 @@ class SoftRobotEnv(gym.Env):
         """
         state = (
             f"'x_position': r[{T.R_COMX}], 'y_position': r[{T.R_COMY}], 'heading': r[{T.R_HEADING}], "
-            f"'time': time, {self.medium_power_key!r}: r[{T.R_P_MED}], 'actuator_power': r[{T.R_P_ACT}], "
-            "**shape, 'newton_iterations': niter"
+            f"'time': {time}, {self.medium_power_key!r}: r[{T.R_P_MED}], 'actuator_power': r[{T.R_P_ACT}], "
+            f"**shape, 'newton_iterations': {niter}"
         )
         if self.task_kind != T.TASK_DIRECTION:
             nav = "target_distance" if self.task_kind == T.TASK_GOAL else "cross_track_error"
@@ -286,15 +305,6 @@ class SoftRobotEnv(gym.Env):
             raw: the unclipped observation ``task.raw``.
         """
         return self._state_of(r, time, self._shape_info(raw, shape), newton_iterations)
-
-    def _own_state(self, r: list[float], out: list[float]) -> tuple[list[float], float, dict[str, Any], int]:
-        """The arguments of this robot's state entries of ``info``, from ``rs`` and ``out`` as lists."""
-        return (
-            r,
-            out[O_NSTEPS] * self._h,
-            self._shape_info(self.task.raw, self._shape.copy()),
-            int(out[O_NITER]),
-        )
 
     def _check_options(self, body: dict[str, np.ndarray]) -> None:
         """Reject an initial body from ``reset(options=...)`` that violates the env's bounds."""
@@ -353,8 +363,13 @@ class SoftRobotEnv(gym.Env):
         self._trail_com.clear()
         self._trail_head.clear()
         self._record_trail()
-        self._last_state = self._own_state(self.task.rs.tolist(), self._out.tolist())
-        info = self._state_of(*self._last_state)
+        # the state ``step`` reports if the next step fails: ``rs`` and ``out`` as lists, the body's entries
+        self._last_state = state = (
+            self.task.rs.tolist(),
+            self._out.tolist(),
+            self._copy_shape(self._own_views),
+        )
+        info = self._own_state_of(*state, self._h)
         info["randomized"] = dict(self.randomized)
         info["failure"] = None
         if self.render_mode == "human":
@@ -404,12 +419,13 @@ class SoftRobotEnv(gym.Env):
         r = task.rs.tolist()
         out = self._out.tolist()
         if ok:
-            self._last_state = state = self._own_state(r, out)
-            info = self._info_of(out, None, *state)
+            shape = self._copy_shape(self._own_views)
+            self._last_state = (r, out, shape)
+            info = self._info_of(out, None, r, shape, self._h)
         else:  # the last valid state, in new arrays (returned data must not be shared)
             self.fail(STATUS_REASONS[status])
-            r0, time, shape, niter = self._last_state
-            info = self._state_of(r0, time, {k: v.copy() for k, v in shape.items()}, niter)
+            r0, out0, shape = self._last_state
+            info = self._own_state_of(r0, out0, {k: v.copy() for k, v in shape.items()}, self._h)
             info.update(self._rest_of(r, out, self._failure))
         if self.render_mode is not None and ok:
             self._record_trail()
@@ -480,7 +496,10 @@ class SoftRobotEnv(gym.Env):
         """The env's state for pickling, without the renderer (figures do not pickle)."""
         state = self.__dict__.copy()
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
-        for name in ("_kernel_args", "_out", "_shape", "_state_of", "_rest_of", "_info_of"):  # made again
+        for name in (  # made again on unpickling
+            "_kernel_args", "_out", "_shape", "_own_views", "_copy_shape",
+            "_state_of", "_rest_of", "_own_state_of", "_info_of",
+        ):  # fmt: skip
             del state[name]
         return state
 

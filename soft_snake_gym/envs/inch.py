@@ -166,6 +166,7 @@ class InchEnv(SoftRobotEnv):
     medium_energy_key = "energy_friction"
     medium_power_key = "friction_power"
     shape_key = "lbar"
+    shape_flags = ("stuck",)  # held as exactly 0.0 or 1.0: astype(bool) takes half the time of "> 0.5"
 
     def __init__(self, render_mode: str | None = None, config: Any = None, **kwargs: Any):
         """Build ``SoftWorm-v0`` (keywords in the class docstring)."""
@@ -234,10 +235,6 @@ class InchEnv(SoftRobotEnv):
                 f"rest_length_limits [{lo:.4g}, {hi:.4g}] m; keep it within those bounds"
             )
 
-    def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
+    def _shape_views(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, np.ndarray]:
         m = self.N - 1
-        return {
-            "edge_lengths": raw[..., :m].copy(),
-            "lbar": shape,
-            "stuck": raw[..., 3 * m : 4 * m + 1].astype(bool),  # exactly 0 or 1: half the time of "> 0.5"
-        }
+        return {"edge_lengths": raw[..., :m], "lbar": shape, "stuck": raw[..., 3 * m : 4 * m + 1]}

@@ -296,5 +296,5 @@ class SwimEnv(SoftRobotEnv):
                 f"max_rest_curvature = {self.max_rest_curvature!r}; keep it within that bound"
             )
 
-    def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
-        return {"kappa": raw[..., : self.N - 2].copy(), "kbar": shape}
+    def _shape_views(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, np.ndarray]:
+        return {"kappa": raw[..., : self.N - 2], "kbar": shape}
