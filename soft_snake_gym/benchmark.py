@@ -456,11 +456,6 @@ def _row(res: dict[str, Any], case: str) -> dict[str, Any] | None:
     return next((r for r in res["throughput"] if r["case"] == case), None)
 
 
-def _rate(res: dict[str, Any], case: str) -> float | None:
-    row = _row(res, case)
-    return row["steps_per_s"] if row else None
-
-
 def _best(res: dict[str, Any], prefix: str, variant: str = "") -> dict[str, Any] | None:
     """The fastest row whose case starts with ``prefix`` (over thread counts), random actions.
 
@@ -474,8 +469,18 @@ def _best(res: dict[str, Any], prefix: str, variant: str = "") -> dict[str, Any]
     return max(rows, key=lambda r: r["steps_per_s"]) if rows else None
 
 
+def _per_round(ours: dict[str, Any], ref: dict[str, Any], sim: bool) -> list[float]:
+    """``ours`` over ``ref`` round by round (round i of every case ran in the same pass), in simulated s if ``sim``."""
+    scale = ours["dt"] / ref["dt"] if sim else 1.0
+    return [a * scale / b for a, b in zip(ours["rounds"], ref["rounds"], strict=True)]
+
+
 def _ratios(res: dict[str, Any]) -> dict[str, Any]:
-    """The target ratios: single envs in steps/s, 256 robots in simulated s per wall s."""
+    """The target ratios: single envs in steps/s, 256 robots in simulated s per wall s.
+
+    Each is of the two cases' medians; ``<key>_rounds`` holds it round by round, which shows how
+    far the machine's changes of speed within the run moved it.
+    """
     out: dict[str, Any] = {}
     swimmer = _row(res, "Swimmer-v5 gym.make")
     pool = _best(res, "EnvPool Swimmer-v4 n=256 ")
@@ -487,20 +492,20 @@ def _ratios(res: dict[str, Any]) -> dict[str, Any]:
         if ours is None:
             continue
         out[f"{key}_case"] = ours["case"]
-        if swimmer:
-            out[f"{key}_vs_swimmer"] = ours["sim_s_per_s"] / swimmer["sim_s_per_s"]
-            out[f"{key}_vs_swimmer_steps"] = ours["steps_per_s"] / swimmer["steps_per_s"]
-        if pool:
-            out[f"{key}_vs_envpool"] = ours["sim_s_per_s"] / pool["sim_s_per_s"]
-            out[f"{key}_vs_envpool_steps"] = ours["steps_per_s"] / pool["steps_per_s"]
+        for ref, name in ((swimmer, "swimmer"), (pool, "envpool")):
+            if ref:
+                out[f"{key}_vs_{name}"] = ours["sim_s_per_s"] / ref["sim_s_per_s"]
+                out[f"{key}_vs_{name}_steps"] = ours["steps_per_s"] / ref["steps_per_s"]
+                out[f"{key}_vs_{name}_rounds"] = _per_round(ours, ref, sim=True)
     if swimmer:
         for key, case in (
             ("single_vs_swimmer", "SoftEel-v0 gym.make"),
             ("worm_single_vs_swimmer", "SoftWorm-v0 gym.make"),
         ):
-            rate = _rate(res, case)
-            if rate:
-                out[key] = rate / swimmer["steps_per_s"]
+            row = _row(res, case)
+            if row:
+                out[key] = row["steps_per_s"] / swimmer["steps_per_s"]
+                out[f"{key}_rounds"] = _per_round(row, swimmer, sim=False)
         gait = _row(res, "SoftEel-v0 batched n=256 threads=1, gait actions")
         if gait:
             out["batched256_gait_vs_swimmer"] = gait["sim_s_per_s"] / swimmer["sim_s_per_s"]
@@ -509,9 +514,12 @@ def _ratios(res: dict[str, Any]) -> dict[str, Any]:
             out["batched256_bdf2_vs_swimmer"] = bdf2["sim_s_per_s"] / swimmer["sim_s_per_s"]
             if pool:
                 out["batched256_bdf2_vs_envpool"] = bdf2["sim_s_per_s"] / pool["sim_s_per_s"]
-    ppo = {r["kind"]: r["steps_per_s"] for r in res["ppo"]}
+    ppo = {r["kind"]: r for r in res["ppo"]}
     if "batched" in ppo and "subproc" in ppo:
-        out["ppo_batched_vs_subproc"] = ppo["batched"] / ppo["subproc"]
+        out["ppo_batched_vs_subproc"] = ppo["batched"]["steps_per_s"] / ppo["subproc"]["steps_per_s"]
+        out["ppo_batched_vs_subproc_rounds"] = [
+            a / b for a, b in zip(ppo["batched"]["rounds"], ppo["subproc"]["rounds"], strict=True)
+        ]
     nodes = res["nodes"]
     if len(nodes) >= 2:
         first, last = nodes[0], nodes[-1]
@@ -585,7 +593,9 @@ def format_report(res: dict[str, Any]) -> str:
         if key in ratios:
             ok = "met" if ratios[key] >= target else f"MISSED by {100 * (1 - ratios[key] / target):.0f} %"
             steps = f"; in steps/s {ratios[key + '_steps']:.2f}x" if key + "_steps" in ratios else ""
-            lines.append(f"  {names[key]:<50} {ratios[key]:6.2f}x  (target {target:g}x: {ok}{steps})")
+            rounds = ratios.get(key + "_rounds")
+            spread = f"; rounds {min(rounds):.2f}x to {max(rounds):.2f}x" if rounds else ""
+            lines.append(f"  {names[key]:<50} {ratios[key]:6.2f}x  (target {target:g}x: {ok}{steps}{spread})")
         else:
             lines.append(f"  {names[key]:<50}   n/a  (not measured)")
     if "batched256_vs_swimmer" in ratios:

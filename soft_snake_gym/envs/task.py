@@ -232,7 +232,7 @@ def task_views(f, obs, N, n_act, n_path):
         f[o_high:o_raw],
         f[o_raw:o_path],
         obs,
-        f[o_path:end].reshape((n_path, 3)),
+        L.rows_of(f, o_path, n_path, 3),
         f,
     )
 

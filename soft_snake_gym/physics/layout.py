@@ -26,8 +26,9 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
-from numba.core import cgutils
+from numba.core import cgutils, types
 from numba.extending import intrinsic, overload
+from numba.np.arrayobj import populate_array
 
 from soft_snake_gym.physics.banded import WIDTH
 
@@ -213,6 +214,46 @@ def _borrowed_overload(arr):
     return lambda arr: _borrowed(arr)
 
 
+def rows_of(arr, start, rows, cols):
+    """``arr[start : start + rows * cols]`` as a (rows, cols) array, :func:`borrowed` when compiled.
+
+    ``arr`` is 1-D and C-contiguous. In compiled code the view's struct is written at once:
+    ``reshape`` calls numba's C helper that checks the new shape against the strides, a quarter
+    of a microsecond a robot step in the batched eel's views (docs/performance.md).
+    """
+    return arr[start : start + rows * cols].reshape(rows, cols)
+
+
+@intrinsic
+def _rows_of(typingctx, arr, start, rows, cols):
+    """Compiled :func:`rows_of`: a (rows, cols) C struct over ``arr``'s data from ``start``, meminfo NULL."""
+    if not (isinstance(arr, types.Array) and arr.ndim == 1 and arr.layout == "C"):
+        return None
+
+    def codegen(context, builder, sig, args):
+        src = context.make_array(sig.args[0])(context, builder, value=args[0])
+        start, rows, cols = (
+            context.cast(builder, v, t, types.intp) for v, t in zip(args[1:], sig.args[1:], strict=True)
+        )
+        out = context.make_array(sig.return_type)(context, builder)
+        populate_array(
+            out,
+            data=cgutils.gep_inbounds(builder, src.data, start),
+            shape=[rows, cols],
+            strides=[builder.mul(cols, src.itemsize), src.itemsize],
+            itemsize=src.itemsize,
+            meminfo=None,
+        )
+        return out._getvalue()
+
+    return types.Array(arr.dtype, 2, "C")(arr, start, rows, cols), codegen
+
+
+@overload(rows_of)
+def _rows_of_overload(arr, start, rows, cols):
+    return lambda arr, start, rows, cols: _rows_of(arr, start, rows, cols)
+
+
 @njit(cache=True, inline="always")
 def sim_views(f, ibuf):
     """One robot's :class:`SimArrays` over its block ``f`` and its ``ibuf`` (compiled code).
@@ -228,8 +269,8 @@ def sim_views(f, ibuf):
         f[o_kbar:o_lbar],
         f[o_lbar:o_prm],
         f[o_prm:o_buf],
-        f[o_buf:o_J].reshape((N_BUF, n2)),
-        f[o_J:o_out].reshape((n2, WIDTH)),
+        rows_of(f, o_buf, N_BUF, n2),
+        rows_of(f, o_J, n2, WIDTH),
         ibuf,
         f[o_out:end],
         f,
