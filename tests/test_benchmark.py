@@ -129,7 +129,13 @@ def test_ppo_timing_runs_from_the_command_line_with_subprocess_workers(tmp_path,
 
 def test_targets_are_read_off_the_default_rows_and_the_variants_are_reported_beside_them():
     def row(case, steps, dt=0.01):
-        return {"case": case, "steps_per_s": steps, "sim_s_per_s": steps * dt}
+        return {
+            "case": case,
+            "steps_per_s": steps,
+            "sim_s_per_s": steps * dt,
+            "dt": dt,
+            "rounds": [steps] * 3,
+        }
 
     res = {
         "throughput": [
@@ -151,3 +157,33 @@ def test_targets_are_read_off_the_default_rows_and_the_variants_are_reported_bes
     assert r["batched256_gait_vs_swimmer"] == pytest.approx(2.25)
     assert r["batched256_bdf2_vs_swimmer"] == pytest.approx(2.0)
     assert r["batched256_bdf2_vs_envpool"] == pytest.approx(1.0)
+
+
+def test_each_target_is_given_round_by_round_beside_the_ratio_of_the_medians():
+    def row(case, rounds, dt):
+        return {"case": case, "steps_per_s": statistics.median(rounds), "dt": dt, "rounds": rounds,
+                "sim_s_per_s": statistics.median(rounds) * dt}  # fmt: skip
+
+    res = {
+        "throughput": [
+            row("SoftWorm-v0 gym.make", [30_000, 36_000, 21_000], 0.01),
+            row("SoftWorm-v0 batched n=256 threads=2", [50_000, 60_000, 70_000], 0.01),
+            row("Swimmer-v5 gym.make", [10_000, 12_000, 7_000], 0.04),
+        ],
+        "ppo": [
+            {"kind": "batched", "n_envs": 8, "steps_per_s": 400, "rounds": [400, 300, 500]},
+            {"kind": "subproc", "n_envs": 8, "steps_per_s": 200, "rounds": [100, 200, 250]},
+        ],
+        "nodes": [],
+    }
+    r = benchmark._ratios(res)
+    # round i of one case against round i of the other: the machine's speed in that pass cancels
+    assert r["worm_single_vs_swimmer"] == pytest.approx(3.0)  # the medians' ratio decides the verdict
+    assert r["worm_single_vs_swimmer_rounds"] == pytest.approx([3.0, 3.0, 3.0])
+    assert r["worm256_vs_swimmer"] == pytest.approx(600 / 400)  # in simulated seconds
+    assert r["worm256_vs_swimmer_rounds"] == pytest.approx([500 / 400, 600 / 480, 700 / 280])
+    assert r["ppo_batched_vs_subproc_rounds"] == pytest.approx([4.0, 1.5, 2.0])
+    res["machine"] = {"platform": "test", "cpus": 2, "numba_threads": 2, "threading_layer": "omp"}
+    res["kernel_share"] = {}
+    text = format_report({**res, "ratios": r})
+    assert "rounds 1.25x to 2.50x" in text and "rounds 1.50x to 4.00x" in text
