@@ -15,30 +15,9 @@ import statistics
 import time
 
 import torch
-from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import CallbackList
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.logger import Logger
-from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
-from soft_snake_gym.benchmark import _ppo_settings
-from soft_snake_gym.envs.registration import importable_id
-from soft_snake_gym.sb3 import SoftVecEnv
-
-
-def make_model(kind: str, env_id: str) -> PPO:
-    """A PPO model at the package's settings for ``env_id`` on the ``kind`` of vector env, warmed up."""
-    n_envs, ppo_kwargs, env_kwargs = _ppo_settings(env_id)
-    if kind == "batched":
-        venv = SoftVecEnv(env_id, n_envs=n_envs, seed=0, **env_kwargs)
-    else:
-        venv = make_vec_env(
-            importable_id(env_id), n_envs=n_envs, seed=0, env_kwargs=env_kwargs, vec_env_cls=SubprocVecEnv
-        )
-    model = PPO("MlpPolicy", VecNormalize(venv), seed=0, device="cpu", **ppo_kwargs)
-    model.set_logger(Logger(folder=None, output_formats=[]))
-    model.learn(model.n_steps * n_envs)  # workers started, kernels loaded, torch initialized
-    return model
+from soft_snake_gym.benchmark import ppo_model
 
 
 def main() -> None:
@@ -47,7 +26,7 @@ def main() -> None:
     parser.add_argument("env_id", nargs="?", default="SoftEel-v0")
     parser.add_argument("--rounds", type=int, default=4)
     args = parser.parse_args()
-    models = {kind: make_model(kind, args.env_id) for kind in ("batched", "subproc")}
+    models = {kind: ppo_model(kind, args.env_id) for kind in ("batched", "subproc")}
     times: dict[tuple[str, int], list[tuple[float, float]]] = {}
     try:
         for _ in range(args.rounds):
@@ -63,7 +42,7 @@ def main() -> None:
                     times.setdefault((kind, threads), []).append((mid - start, time.perf_counter() - mid))
     finally:
         for model in models.values():
-            model.env.close()
+            model.get_env().close()
     steps = models["batched"].n_steps * models["batched"].n_envs
     print(f"{args.env_id}, {steps} steps an iteration, medians of {args.rounds} rounds")
     print("kind      torch threads  rollout s  update s  steps/s")

@@ -204,6 +204,41 @@ def _ppo_settings(env_id: str) -> tuple[int, dict[str, Any], dict[str, Any]]:
     return cfg.n_envs, {**cfg.hyperparams, "policy_kwargs": policy_kwargs(cfg)}, dict(cfg.env_kwargs)
 
 
+def ppo_model(kind: str, env_id: str, n_envs: int | None = None) -> Any:
+    """A PPO model at the package's settings for ``env_id``, warmed up (one rollout and update).
+
+    On the batched env (``kind="batched"``) or on ``SubprocVecEnv`` (``"subproc"``), either one
+    wrapped in ``VecNormalize``, with ``n_envs`` envs (the config's without it), logging nowhere.
+    The caller closes ``model.get_env()``.
+    """
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.logger import Logger
+    from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
+
+    # here, not at the top: sb3 imports Stable-Baselines3 and torch (seconds), which the
+    # command line would otherwise pay on every start
+    from soft_snake_gym.sb3 import SoftVecEnv
+
+    cfg_envs, ppo_kwargs, env_kwargs = _ppo_settings(env_id)
+    n_envs = n_envs or cfg_envs
+    if kind == "batched":
+        venv = SoftVecEnv(env_id, n_envs=n_envs, seed=0, **env_kwargs)
+    else:
+        venv = make_vec_env(
+            importable_id(env_id), n_envs=n_envs, seed=0, env_kwargs=env_kwargs, vec_env_cls=SubprocVecEnv
+        )
+    try:
+        model = PPO("MlpPolicy", VecNormalize(venv), seed=0, device="cpu", **ppo_kwargs)
+        # no log files: SB3's default logger would leave an empty /tmp/SB3-<date> per run
+        model.set_logger(Logger(folder=None, output_formats=[]))
+        model.learn(model.n_steps * n_envs)  # warm-up: workers started, kernels loaded, torch initialized
+    except BaseException:
+        venv.close()
+        raise
+    return model
+
+
 def time_ppo(
     env_id: str,
     n_envs: int | None,
@@ -223,38 +258,14 @@ def time_ppo(
     rollout does).
     """
     import torch
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.utils import obs_as_tensor
-    from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
-    # here, not at the top: sb3 imports Stable-Baselines3 and torch (seconds), which the
-    # command line would otherwise pay on every start
-    from soft_snake_gym.sb3 import SoftVecEnv
-
-    cfg_envs, ppo_kwargs, env_kwargs = _ppo_settings(env_id)
-    n_envs = n_envs or cfg_envs
     torch.set_num_threads(1)  # as soft_snake_gym.training does
     models: dict[str, Any] = {}
-    envs = []
     try:
         for kind in kinds:
-            if kind == "batched":
-                venv = SoftVecEnv(env_id, n_envs=n_envs, seed=0, **env_kwargs)
-            else:
-                venv = make_vec_env(
-                    importable_id(env_id),
-                    n_envs=n_envs,
-                    seed=0,
-                    env_kwargs=env_kwargs,
-                    vec_env_cls=SubprocVecEnv,
-                )
-            envs.append(VecNormalize(venv))
-            model = models[kind] = PPO("MlpPolicy", envs[-1], seed=0, device="cpu", **ppo_kwargs)
-            # no log files: SB3's default logger would leave an empty /tmp/SB3-<date> per run
-            model.set_logger(Logger(folder=None, output_formats=[]))
-            model.learn(model.n_steps * n_envs)  # warm-up: workers started, kernels loaded, torch initialized
+            models[kind] = ppo_model(kind, env_id, n_envs)
+        n_envs = models[kinds[0]].n_envs
         rollout = models[kinds[0]].n_steps * n_envs
         per_round = rollout * max(1, round(timesteps / (repeats * rollout)))
         steps = per_round // n_envs
@@ -283,8 +294,8 @@ def time_ppo(
                 model.learn(per_round, reset_num_timesteps=False)
                 rates.setdefault("learn", []).append(per_round / (time.perf_counter() - start))
     finally:
-        for env in envs:
-            env.close()
+        for model in models.values():
+            model.get_env().close()
     rows = []
     for kind, rates in rounds.items():
         row = {
@@ -297,7 +308,7 @@ def time_ppo(
         if "step" in rates:
             row["step_steps_per_s"] = statistics.median(rates["step"])
             row["inference_steps_per_s"] = statistics.median(rates["inference"])
-        rows.append(row | {k: ppo_kwargs.get(k) for k in ("n_steps", "batch_size", "n_epochs")})
+        rows.append(row | {k: getattr(models[kind], k) for k in ("n_steps", "batch_size", "n_epochs")})
     return rows
 
 
