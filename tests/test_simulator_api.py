@@ -136,6 +136,27 @@ def test_arrays_are_views_of_their_blocks_and_stay_so_when_pickled(batch):
     assert task.path.shape == batch + (4, 3) and task.obs.shape == batch + (25,)
 
 
+def test_borrowed_tuples_in_compiled_code_are_the_same_arrays_member_by_member():
+    # the batched step borrows its stacks and its per-thread scratch as whole (nested) tuples
+    from numba import njit
+    from numba.core.errors import TypingError
+
+    from soft_snake_gym.physics.layout import borrowed
+
+    @njit
+    def mark(tup):
+        sim, (a, (b, c)) = borrowed(tup)
+        sim.q[0], sim.out[-1], a[0], b[1], c[2] = 1.0, 2.0, 3.0, 4.0, 5.0
+
+    sim = allocate_arrays(4)
+    a, b, c = np.zeros(3), np.zeros(3), np.zeros(3, dtype=np.int64)
+    mark((sim, (a, (b, c))))  # a NamedTuple in a nested plain tuple
+    assert (sim.q[0], sim.out[-1]) == (1.0, 2.0) and sim.q[1:].tolist() == [0.0] * (sim.q.size - 1)
+    assert (a.tolist(), b.tolist(), c.tolist()) == ([3.0, 0, 0], [0, 4.0, 0], [0, 0, 5])
+    with pytest.raises(TypingError):  # only arrays have a count to drop: anything else is refused
+        njit(lambda t: borrowed(t))((a, 1))
+
+
 def test_bad_state_raises_clear_errors():
     sim = Simulator()
     with pytest.raises(ValueError, match=r"x has shape \(9, 2\); expected \(10, 2\)"):

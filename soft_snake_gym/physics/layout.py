@@ -190,21 +190,40 @@ def borrowed(arr):
 
     Views of it are not counted either, so a kernel that builds views of a block it was given
     pays no atomic increments and decrements for them. Only for views that do not outlive the
-    call that borrowed them (the caller's array keeps the memory alive). In Python (the
-    kernels run with ``NUMBA_DISABLE_JIT=1``) it is ``arr`` itself.
+    call that borrowed them (the caller's array keeps the memory alive). A tuple (a NamedTuple
+    too) of arrays and tuples comes back with every array in it borrowed: reading a member of
+    a counted tuple is an increment and a decrement. In Python (the kernels run with
+    ``NUMBA_DISABLE_JIT=1``) it is ``arr`` itself.
     """
     return arr
 
 
-@intrinsic
-def _borrowed(typingctx, arr):
-    """Compiled :func:`borrowed`: a copy of the array's struct with a NULL meminfo and parent."""
-
-    def codegen(context, builder, sig, args):
-        out = context.make_array(sig.return_type)(context, builder, value=args[0])
+def _borrow(context, builder, ty, value):
+    """``value`` of type ``ty`` with the meminfo and parent of every array in it NULL."""
+    if isinstance(ty, types.Array):
+        out = context.make_array(ty)(context, builder, value=value)
         out.meminfo = cgutils.get_null_value(out.meminfo.type)
         out.parent = cgutils.get_null_value(out.parent.type)
         return out._getvalue()
+    for k, item in enumerate(ty):
+        member = _borrow(context, builder, item, builder.extract_value(value, k))
+        value = builder.insert_value(value, member, k)
+    return value
+
+
+def _borrowable(ty):
+    """True for an array, or a tuple of arrays and such tuples."""
+    return isinstance(ty, types.Array) or (isinstance(ty, types.BaseTuple) and all(map(_borrowable, ty)))
+
+
+@intrinsic
+def _borrowed(typingctx, arr):
+    """Compiled :func:`borrowed`: a copy of the array's (or each array's) struct with a NULL meminfo and parent."""
+    if not _borrowable(arr):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return _borrow(context, builder, sig.args[0], args[0])
 
     return arr(arr), codegen
 
@@ -280,18 +299,7 @@ def sim_views(f, ibuf):
 @njit(cache=True, inline="always")
 def borrowed_arrays(s):
     """:class:`SimArrays` of the arrays of ``s`` (a SimArrays or the plain tuple), each :func:`borrowed`."""
-    return SimArrays(
-        borrowed(s[0]),
-        borrowed(s[1]),
-        borrowed(s[2]),
-        borrowed(s[3]),
-        borrowed(s[4]),
-        borrowed(s[5]),
-        borrowed(s[6]),
-        borrowed(s[7]),
-        borrowed(s[8]),
-        borrowed(s[9]),
-    )
+    return borrowed(SimArrays(*s))
 
 
 def sim_arrays_over(f: np.ndarray, ibuf: np.ndarray) -> SimArrays:
