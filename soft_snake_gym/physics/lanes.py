@@ -701,20 +701,35 @@ def energies(x, p):
             energy[2, r] += 0.5 * p[L_CM, r] * w * w / E[_ix(3 * i, r)]
 
 
+@njit(cache=True, inline="always")
+def _going(on, done, r):
+    """True if lane ``r`` is on :func:`newton`'s common path and has not converged yet."""
+    return on[r] and done[r] == 0
+
+
+@njit(cache=True, inline="always")
+def _any_going(on, done):
+    """True if any lane is :func:`_going` (a loop: a mask expression would allocate arrays)."""
+    for r in range(LANES):
+        if _going(on, done, r):
+            return True
+    return False
+
+
 @njit(cache=True, error_model="numpy")
-def _full_step(x, lanes_on, n2):
-    """``_be_newton``'s update at full length for the lanes ``lanes_on``: ``v = vacc + 1 dv``.
+def _full_step(x, n2):
+    """``_be_newton``'s update at full length for the lanes :func:`_going`: ``v = vacc + 1 dv``.
 
     ``vacc`` = v, ``dv`` = -R solved with the factors in J; the other lanes keep their ``v``.
     """
-    v, R, J, vacc, dv = x.v, x.R, x.J, x.vacc, x.dv
+    v, R, J, vacc, dv, on, done = x.v, x.R, x.J, x.vacc, x.dv, x.on, x.done
     for k in range(n2 * LANES):
         vacc[k] = v[k]
         dv[k] = -R[k]
     solve(J, dv, n2)
     for k in range(n2):
         for r in range(LANES):
-            if lanes_on[r]:
+            if _going(on, done, r):
                 v[_ix(k, r)] = vacc[_ix(k, r)] + 1.0 * dv[_ix(k, r)]
 
 
@@ -742,14 +757,13 @@ def newton(s, first, go, x, p, dt, result):
             on[r], done[r] = True, 1
         else:  # an iteration cap of 0 or a non-finite start: _be_newton gives up, it says why
             on[r] = int(p[L_MAXIT, r]) > 0 and math.isfinite(res[L_NORM2, r])
-    iterate = on & (done == 0)
-    if iterate.any():
+    if _any_going(on, done):
         # the Newton step: factors, solve, the full step accepted if |R|^2 falls
         factor(x.J, kept, n2)
-        _full_step(x, iterate, n2)
+        _full_step(x, n2)
         residual(x, p, dt, False, res1)
         for r in range(LANES):
-            if not iterate[r]:
+            if not _going(on, done, r):
                 continue
             if not (kept[r] and res1[L_NORM2, r] < res[L_NORM2, r] * (1.0 - 1e-4 * 1.0)):
                 on[r] = False  # a row exchange, or a line search
@@ -761,19 +775,19 @@ def newton(s, first, go, x, p, dt, result):
                 and res1[L_RMAX, r] <= p[L_CHORD, r] * res[L_RMAX, r]
             ):
                 on[r] = False  # a renewed Jacobian, or the cap
-        chord = on & (done == 0)
-        if chord.any():
+        if _any_going(on, done):
             # the chord step: the same factors, accepted if |R|^2 falls
-            _full_step(x, chord, n2)
+            _full_step(x, n2)
             residual(x, p, dt, False, res)
             for r in range(LANES):
-                if not chord[r]:
+                if not _going(on, done, r):
                     continue
                 if res[L_NORM2, r] < res1[L_NORM2, r] * (1.0 - 1e-4) and res[L_RMAX, r] <= p[L_TOL, r]:
                     done[r] = 3
                     res1[L_RMAX, r], res1[L_PFLUID, r] = res[L_RMAX, r], res[L_PFLUID, r]
                 else:
                     on[r] = False
+    solved = 0
     for r in range(LANES):
         if not go[r]:
             continue
@@ -797,4 +811,5 @@ def newton(s, first, go, x, p, dt, result):
             out[O_NRES] += it
             out[O_NFACTOR] += 1.0 if it > 0 else 0.0
         result[0, r], result[1, r], result[2, r], result[3, r], result[4, r] = status, it, rmax, pf, pfr
-    return (on & go).sum()
+        solved += on[r]
+    return solved
