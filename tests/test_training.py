@@ -15,7 +15,7 @@ import yaml
 from support import TINY_TRAINING, cli, cli_in_background, sigint_at_default
 
 from soft_snake_gym.cli import main
-from soft_snake_gym.training import TrainConfig, load_train_config
+from soft_snake_gym.training import TrainConfig, load_train_config, policy_kwargs
 
 
 @pytest.fixture(scope="module")
@@ -213,6 +213,23 @@ def test_hyperparameter_file_is_plain_yaml_keyed_by_env_id():
     assert sac.algo == "SAC" and "buffer_size" in sac.hyperparams
     # an empty init_from (YAML null, or "--hyperparams init_from=") starts at random, as ""
     assert load_train_config("SoftEel-v0", overrides={"init_from": None}).init_from == ""
+
+
+def test_the_run_trained_with_fused_adam_and_a_config_can_turn_it_off(trained_run):
+    from stable_baselines3 import PPO
+
+    # the saved model's policy is rebuilt with the run's policy_kwargs: its optimizer is the run's
+    assert PPO.load(trained_run / "final_model.zip", device="cpu").policy.optimizer.defaults["fused"] is True
+    off = {"policy_kwargs": {"optimizer_kwargs": {"fused": False, "weight_decay": 0.01}}}
+    assert policy_kwargs(load_train_config("SoftEel-v0", overrides=off))["optimizer_kwargs"] == {
+        "fused": False,
+        "weight_decay": 0.01,
+    }
+    kept = {"policy_kwargs": {"optimizer_kwargs": {"weight_decay": 0.01}}}
+    assert policy_kwargs(load_train_config("SoftEel-v0", overrides=kept))["optimizer_kwargs"] == {
+        "fused": True,
+        "weight_decay": 0.01,
+    }
 
 
 @pytest.mark.parametrize("env_id,baseline", [("SoftEel-v0", "pid"), ("SoftWorm-v0", "inching-pid")])
