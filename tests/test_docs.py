@@ -1,7 +1,7 @@
 """The repository stands alone.
 
 Its documents and code refer to the model in docs/model.md, never to a file outside the repository,
-and every section they cite exists there.
+and every section they cite exists there, as does every section of docs/performance.md they name.
 """
 
 from __future__ import annotations
@@ -49,6 +49,20 @@ def test_every_cited_section_of_the_model_exists():
     }
     assert cited, "nothing cites the model"
     assert cited <= sections, f"cited but missing in docs/model.md: {sorted(cited - sections)}"
+
+
+def test_every_named_section_of_the_performance_notes_exists():
+    perf = (ROOT / "docs" / "performance.md").read_text()
+    headings = {h.strip() for h in re.findall(r"^#{2,3} (.+)$", perf, flags=re.M)}
+    named = set()
+    for f in _tracked_text_files():
+        # a citation may wrap onto the next line of a comment or docstring
+        text = re.sub(r"\s*\n\s*(?:#\s*)?", " ", f.read_text(errors="replace"))
+        named |= set(re.findall(r'docs/performance\.md, "([^"]+)"', text))
+    assert named, "nothing names a section of docs/performance.md"
+    # a name is a heading or its start ("Borrowed views" for "Borrowed views: no reference counts ...")
+    missing = sorted(n for n in named if not any(h.startswith(n) for h in headings))
+    assert not missing, f"named but missing in docs/performance.md: {missing}"
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,7 @@ banded factorization and the solves), its end (:func:`stage_end`: the powers, an
 curvatures for the observation), then the energies (:func:`energies`). :func:`take` copies the
 robots into a :class:`Block` once a step and :func:`put` copies them back. LLVM vectorizes a
 loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/performance.md,
-"Sixteen lanes"):
+"Sixteen eels per instruction"):
 
 - every array of the block is flat, element ``i`` of lane ``r`` at ``i * LANES + r`` (a band
   entry (row, col) at ``(row * WIDTH + col) * LANES + r``), strides that are compile-time
