@@ -230,6 +230,10 @@ def test_the_run_trained_with_fused_adam_and_a_config_can_turn_it_off(trained_ru
         "fused": True,
         "weight_decay": 0.01,
     }
+    null = {"policy_kwargs": {"optimizer_kwargs": None}}  # YAML null, as SB3 reads it: no keywords
+    assert policy_kwargs(load_train_config("SoftEel-v0", overrides=null))["optimizer_kwargs"] == {
+        "fused": True
+    }
 
 
 @pytest.mark.parametrize("env_id,baseline", [("SoftEel-v0", "pid"), ("SoftWorm-v0", "inching-pid")])

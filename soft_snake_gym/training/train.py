@@ -72,7 +72,8 @@ def policy_kwargs(cfg: TrainConfig) -> dict[str, Any]:
     import torch.nn as nn  # here, not above: torch takes seconds to import
 
     kwargs = dict(cfg.policy_kwargs)
-    kwargs["optimizer_kwargs"] = {"fused": True, **kwargs.get("optimizer_kwargs", {})}
+    given = kwargs.get("optimizer_kwargs") or {}  # YAML null: no keywords, as SB3 reads it
+    kwargs["optimizer_kwargs"] = {"fused": True, **given}
     act = kwargs.pop("activation_fn", None)
     if act is not None:
         kwargs["activation_fn"] = {
