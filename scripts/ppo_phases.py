@@ -3,7 +3,8 @@
 ``soft-snake benchmark`` times the whole ``model.learn``; its ratio of the two kinds mixes the
 env's cost with what both pay alike (the policy's forward pass in the rollout, the gradient
 updates). This script times ``collect_rollouts`` and ``train`` separately, at the package's PPO
-settings for the env, in interleaved rounds, with one and with two torch threads:
+settings for the env, in interleaved rounds, with one and with two torch threads (and, as
+``soft-snake train`` runs it, ``torch.distributions`` unchecked):
 
     python scripts/ppo_phases.py SoftEel-v0 --rounds 4
 """
@@ -18,6 +19,7 @@ import torch
 from stable_baselines3.common.callbacks import CallbackList
 
 from soft_snake_gym.benchmark import ppo_model
+from soft_snake_gym.training import torch_for_learning
 
 
 def main() -> None:
@@ -26,6 +28,12 @@ def main() -> None:
     parser.add_argument("env_id", nargs="?", default="SoftEel-v0")
     parser.add_argument("--rounds", type=int, default=4)
     args = parser.parse_args()
+    with torch_for_learning():
+        _time_phases(args)
+
+
+def _time_phases(args: argparse.Namespace) -> None:
+    """The rounds and the report of :func:`main`."""
     models = {kind: ppo_model(kind, args.env_id) for kind in ("batched", "subproc")}
     times: dict[tuple[str, int], list[tuple[float, float]]] = {}
     try:

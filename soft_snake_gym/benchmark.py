@@ -48,7 +48,7 @@ import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.envs.registration import importable_id
 from soft_snake_gym.envs.vector import ROBOTS_PER_THREAD
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-from soft_snake_gym.training import load_train_config, policy_kwargs
+from soft_snake_gym.training import load_train_config, policy_kwargs, torch_for_learning
 
 __all__ = ["run_benchmark", "format_report", "DEFAULT_ROBOTS", "DEFAULT_NODES", "ENVPOOL_ROBOTS"]
 
@@ -260,42 +260,42 @@ def time_ppo(
     import torch
     from stable_baselines3.common.utils import obs_as_tensor
 
-    torch.set_num_threads(1)  # as soft_snake_gym.training does
-    models: dict[str, Any] = {}
-    try:
-        for kind in kinds:
-            models[kind] = ppo_model(kind, env_id, n_envs)
-        n_envs = models[kinds[0]].n_envs
-        rollout = models[kinds[0]].n_steps * n_envs
-        per_round = rollout * max(1, round(timesteps / (repeats * rollout)))
-        steps = per_round // n_envs
-        actions = np.random.default_rng(0).uniform(
-            -1, 1, (steps, n_envs) + models[kinds[0]].action_space.shape
-        )
-        rounds: dict[str, dict[str, list[float]]] = {kind: {} for kind in kinds}
-        for _ in range(repeats):
-            for kind, model in models.items():
-                rates = rounds[kind]
-                env = model.get_env()
-                if kind == "batched":
+    with torch_for_learning():  # as soft_snake_gym.training runs torch
+        models: dict[str, Any] = {}
+        try:
+            for kind in kinds:
+                models[kind] = ppo_model(kind, env_id, n_envs)
+            n_envs = models[kinds[0]].n_envs
+            rollout = models[kinds[0]].n_steps * n_envs
+            per_round = rollout * max(1, round(timesteps / (repeats * rollout)))
+            steps = per_round // n_envs
+            actions = np.random.default_rng(0).uniform(
+                -1, 1, (steps, n_envs) + models[kinds[0]].action_space.shape
+            )
+            rounds: dict[str, dict[str, list[float]]] = {kind: {} for kind in kinds}
+            for _ in range(repeats):
+                for kind, model in models.items():
+                    rates = rounds[kind]
+                    env = model.get_env()
+                    if kind == "batched":
+                        start = time.perf_counter()
+                        for a in actions:
+                            env.step(a)
+                        rates.setdefault("step", []).append(per_round / (time.perf_counter() - start))
+                        obs = env.reset()
+                        low, high = env.action_space.low, env.action_space.high
+                        start = time.perf_counter()
+                        for _ in range(steps):
+                            with torch.no_grad():
+                                act = model.policy(obs_as_tensor(obs, model.device))[0].numpy()
+                            obs = env.step(np.clip(act, low, high))[0]
+                        rates.setdefault("inference", []).append(per_round / (time.perf_counter() - start))
                     start = time.perf_counter()
-                    for a in actions:
-                        env.step(a)
-                    rates.setdefault("step", []).append(per_round / (time.perf_counter() - start))
-                    obs = env.reset()
-                    low, high = env.action_space.low, env.action_space.high
-                    start = time.perf_counter()
-                    for _ in range(steps):
-                        with torch.no_grad():
-                            act = model.policy(obs_as_tensor(obs, model.device))[0].numpy()
-                        obs = env.step(np.clip(act, low, high))[0]
-                    rates.setdefault("inference", []).append(per_round / (time.perf_counter() - start))
-                start = time.perf_counter()
-                model.learn(per_round, reset_num_timesteps=False)
-                rates.setdefault("learn", []).append(per_round / (time.perf_counter() - start))
-    finally:
-        for model in models.values():
-            model.get_env().close()
+                    model.learn(per_round, reset_num_timesteps=False)
+                    rates.setdefault("learn", []).append(per_round / (time.perf_counter() - start))
+        finally:
+            for model in models.values():
+                model.get_env().close()
     rows = []
     for kind, rates in rounds.items():
         row = {

@@ -236,6 +236,55 @@ def test_the_run_trained_with_fused_adam_and_a_config_can_turn_it_off(trained_ru
     }
 
 
+def test_train_runs_torch_unchecked_on_one_thread_and_restores_it(tmp_path):
+    import torch
+    from torch.distributions import Distribution, Normal
+
+    from soft_snake_gym.training import train
+
+    seen = []
+    overrides = {
+        "n_envs": 2,
+        "n_steps": 64,
+        "batch_size": 64,
+        "n_epochs": 2,
+        "n_timesteps": 128,
+        "eval_freq": 128,
+        "eval_episodes": 1,
+        "env_kwargs": {"max_episode_steps": 100},
+    }
+    torch.set_num_threads(2)
+    train(
+        load_train_config("SoftEel-v0", overrides=overrides),
+        tmp_path / "run",
+        progress=False,
+        on_eval=lambda row: seen.append((Distribution._validate_args, torch.get_num_threads())),
+    )
+    assert len(seen) == 2 and set(seen) == {(False, 1)}  # inside learn: the evaluations at 0 and 128 steps
+    assert (Distribution._validate_args, torch.get_num_threads()) == (__debug__, 2)  # restored
+    with pytest.raises(ValueError, match="scale"):  # checked again: a negative scale is refused
+        Normal(torch.zeros(1), -torch.ones(1))
+
+
+def test_a_policy_gone_nan_is_still_stopped_with_a_message_when_unchecked():
+    import torch
+    from stable_baselines3 import PPO
+
+    from soft_snake_gym.sb3 import SoftVecEnv
+    from soft_snake_gym.training import torch_for_learning
+
+    env = SoftVecEnv("SoftEel-v0", n_envs=2, seed=0)
+    model = PPO("MlpPolicy", env, n_steps=8, batch_size=16, device="cpu", seed=0)
+    with torch.no_grad():
+        for p in model.policy.action_net.parameters():
+            p.fill_(float("nan"))
+    try:
+        with torch_for_learning(), pytest.raises(ValueError, match="non-finite entries for robots"):
+            model.learn(16)
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("env_id,baseline", [("SoftEel-v0", "pid"), ("SoftWorm-v0", "inching-pid")])
 def test_shipped_agents_beat_their_baselines(env_id, baseline):
     """The agents in soft_snake_gym/zoo do what docs/training.md says, on a seed they were not selected on.

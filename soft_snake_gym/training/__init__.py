@@ -24,7 +24,7 @@ from soft_snake_gym.training.run import (
     plot_learning_curve,
     save_checkpoint,
 )
-from soft_snake_gym.training.train import make_train_env, policy_kwargs, train
+from soft_snake_gym.training.train import make_train_env, policy_kwargs, torch_for_learning, train
 
 __all__ = [
     "ACTIVATIONS",
@@ -44,5 +44,6 @@ __all__ = [
     "policy_kwargs",
     "save_checkpoint",
     "steps_per_iteration",
+    "torch_for_learning",
     "train",
 ]

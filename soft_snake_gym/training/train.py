@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,7 @@ from soft_snake_gym.training.run import (
     save_checkpoint,
 )
 
-__all__ = ["init_from", "make_train_env", "policy_kwargs", "train"]
+__all__ = ["init_from", "make_train_env", "policy_kwargs", "torch_for_learning", "train"]
 
 
 def make_train_env(cfg: TrainConfig, seed: int):
@@ -158,6 +159,30 @@ def init_from(model: Any, spec: str) -> None:
         vn.ret_rms = source.ret_rms
 
 
+@contextlib.contextmanager
+def torch_for_learning() -> Iterator[None]:
+    """Torch as :func:`train` runs it; both settings are restored on leaving.
+
+    - One thread: the policies are small MLPs, whose operations threads slow down on 2 cores.
+    - ``torch.distributions`` without argument checks: each policy call builds a ``Normal`` and
+      would check its mean and standard deviation (and ``log_prob`` its sample) for NaN and
+      sign, which is 14 % of a rollout's policy call and 8 % of PPO's ``learn`` at the
+      ``SoftEel-v0`` settings (docs/performance.md, "Distributions unchecked"). A policy that
+      goes NaN is still stopped, with a message, by the env: a NaN action raises ``ValueError``.
+    """
+    import torch  # here, not above: torch takes seconds to import
+    from torch.distributions import Distribution
+
+    threads, checked = torch.get_num_threads(), Distribution._validate_args
+    torch.set_num_threads(1)
+    Distribution.set_default_validate_args(False)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+        Distribution.set_default_validate_args(checked)
+
+
 def train(
     cfg: TrainConfig,
     run_dir: str | Path,
@@ -180,13 +205,23 @@ def train(
         ConfigError: an unknown env id, a resume folder without a checkpoint, a folder that
             holds another run, a config that SB3 or the env rejects.
     """
-    import torch  # here, not above: SB3 and torch take seconds to import
-    from stable_baselines3.common.vec_env import VecNormalize
-
     check_env_id(cfg.env_id)
-    run_dir = Path(run_dir)
+    with torch_for_learning():
+        return _train(cfg, Path(run_dir), resume, progress, command, on_eval)
+
+
+def _train(
+    cfg: TrainConfig,
+    run_dir: Path,
+    resume: bool,
+    progress: bool,
+    command: list[str] | None,
+    on_eval: Callable[[dict[str, float]], None] | None,
+) -> Path:
+    """:func:`train`'s run, under :func:`torch_for_learning`."""
+    from stable_baselines3.common.vec_env import VecNormalize  # here: SB3 takes seconds to import
+
     started = time.time()
-    torch.set_num_threads(1)  # small MLPs: threads cost more than they give on 2 cores
     algo = _algo_class(cfg.algo)
     if resume:
         found = latest_checkpoint(run_dir) if run_dir.is_dir() else None
