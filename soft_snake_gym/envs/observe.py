@@ -117,17 +117,19 @@ def swim_observation_curved(q, v, kbar, w, goal, low, high, raw, out):
 
 
 @njit(cache=True, error_model="numpy")
-def inch_observation(q, v, lbar, friction, ground, w, low, high, raw, out):
+def inch_observation(q, v, lbar, friction, ground, w, low, high, raw, out, geo):
     """The ``SoftWorm-v0`` observation.
 
     Edge_lengths (N-1), edge_length_rates (N-1), lbar (N-1), stuck (N, 0/1 from the friction states
     ``friction``; all 0 unless ``ground``), com_velocity_body (2). Same outputs as
-    :func:`swim_observation`; returns the heading [rad].
+    :func:`swim_observation` (``geo`` the same scratch); returns the heading [rad].
     """
     m = lbar.size
-    geometry.edge_lengths(q, raw[:m])
-    geometry.edge_length_rates(q, v, raw[m : 2 * m])
+    geometry.edge_geometry(q, geo)  # one square root an edge for both blocks (libm's hypot is slower)
     for k in range(m):
+        raw[k] = geo[0, k]
+        tx, ty = geo[1, 2 * k], geo[1, 2 * k + 1]
+        raw[m + k] = tx * (v[2 * k + 2] - v[2 * k]) + ty * (v[2 * k + 3] - v[2 * k + 1])
         raw[2 * m + k] = lbar[k]
     for i in range(m + 1):
         raw[3 * m + i] = 1.0 if ground and friction[i] == STUCK else 0.0

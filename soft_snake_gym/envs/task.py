@@ -300,8 +300,9 @@ def _observe(s, t, curved):
         geo = s.buf[L.B_GEO : L.B_GEO + 2]
         return observe.swim_observation(s.q, s.v, s.kbar, w, goal, t.low, t.high, t.raw, t.obs, geo)
     ground = int(s.prm[L.P_MEDIUM]) == L.MEDIUM_GROUND
+    geo = s.buf[L.B_GEO : L.B_GEO + 2]
     return observe.inch_observation(
-        s.q, s.v, s.lbar, s.ibuf[L.I_FRICTION], ground, t.w, t.low, t.high, t.raw, t.obs
+        s.q, s.v, s.lbar, s.ibuf[L.I_FRICTION], ground, t.w, t.low, t.high, t.raw, t.obs, geo
     )
 
 

@@ -151,8 +151,9 @@ def classify_contact(v, state, i, limit, at_limit):
     Backward Euler passes ``limit = V_tol``; the explicit method passes the speed static
     friction removes in a sub-step, ``mu_s g dt``, with ``at_limit``.
     """
-    w = math.hypot(v[2 * i], v[2 * i + 1])
-    if w < limit or (at_limit and w == limit):
+    w2 = v[2 * i] * v[2 * i] + v[2 * i + 1] * v[2 * i + 1]  # squared: no square root (nor libm's hypot)
+    limit2 = limit * limit
+    if w2 < limit2 or (at_limit and w2 == limit2):
         state[i] = STUCK
         v[2 * i] = 0.0
         v[2 * i + 1] = 0.0
@@ -297,8 +298,8 @@ def _update_contacts(v, buf, ibuf, prm, dt, n):
             continue
         fx = -m[2 * i] * v0[2 * i] / dt - F[2 * i]
         fy = -m[2 * i] * v0[2 * i + 1] / dt - F[2 * i + 1]
-        f = math.hypot(fx, fy)
-        if f <= prm[P_MUS] * m[2 * i] * prm[P_G]:
+        hold = prm[P_MUS] * m[2 * i] * prm[P_G]
+        if fx * fx + fy * fy <= hold * hold:
             continue
         _release(v, state, i, -fx, -fy, prm[P_VTOL])
         switches[i] += 1
@@ -354,7 +355,8 @@ def _be_start(s, medium, extrapolate):
             assemble(q, v, s.kbar, s.lbar, prm, F, J, 0.0, 0.0, False, False, buf[B_GEO : B_GEO + 2])
             for i in range(n // 2):
                 r0, r1 = 2 * i, 2 * i + 1
-                if state[i] == STUCK and math.hypot(F[r0], F[r1]) > prm[P_MUS] * m[r0] * prm[P_G]:
+                hold = prm[P_MUS] * m[r0] * prm[P_G]
+                if state[i] == STUCK and F[r0] * F[r0] + F[r1] * F[r1] > hold * hold:
                     _release(v, state, i, F[r0], F[r1], prm[P_VTOL])
     else:
         # predictor: extrapolate the velocity from the last step (v0 still holds its start;
