@@ -147,8 +147,9 @@ def _reference_factor(J, piv, n, threshold):
         if p != k:
             for j in range(k, jmax + 1):
                 J[k, j - k + KL], J[p, j - p + KL] = J[p, j - p + KL], J[k, j - k + KL]
+        J[k, KL] = 1.0 / J[k, KL]  # the factors hold the pivot's reciprocal
         for i in range(k + 1, imax):
-            f = J[i, k - i + KL] / J[k, KL]
+            f = J[i, k - i + KL] * J[k, KL]
             J[i, k - i + KL] = f
             if f != 0.0:
                 for j in range(k + 1, jmax + 1):
@@ -168,7 +169,7 @@ def _reference_solve(J, piv, n, b):
         s = b[k]
         for j in range(k + 1, min(n - 1, k + KL + KU, max(k + KU, reach)) + 1):
             s -= J[k, j - k + KL] * b[j]
-        b[k] = s / J[k, KL]
+        b[k] = s * J[k, KL]
 
 
 @pytest.mark.parametrize("n", [4, 11, 20, 40])

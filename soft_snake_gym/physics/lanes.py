@@ -435,17 +435,20 @@ def factor(J, kept, n):
             kept[r] = kept[r] and diag >= PIVOT_THRESHOLD * best and best > 0.0
         if whole:
             for r in range(LANES):
-                pivot = J[_jx(k, KL, r)]
+                inv = 1.0 / J[_jx(k, KL, r)]  # the factors hold the pivot's reciprocal, as band_factor's
+                J[_jx(k, KL, r)] = inv
                 for e in range(1, KL + 1):
-                    f = J[_jx(k + e, KL - e, r)] / pivot
+                    f = J[_jx(k + e, KL - e, r)] * inv
                     J[_jx(k + e, KL - e, r)] = f
                     if f != 0.0:
                         for c in range(1, KU + 1):
                             J[_jx(k + e, KL - e + c, r)] -= f * J[_jx(k, KL + c, r)]
             continue
+        for r in range(LANES):
+            J[_jx(k, KL, r)] = 1.0 / J[_jx(k, KL, r)]
         for i in range(k + 1, min(n, k + KL + 1)):
             for r in range(LANES):
-                f = J[_jx(i, k - i + KL, r)] / J[_jx(k, KL, r)]
+                f = J[_jx(i, k - i + KL, r)] * J[_jx(k, KL, r)]
                 J[_jx(i, k - i + KL, r)] = f
                 if f != 0.0:
                     for j in range(k + 1, min(n - 1, k + KU) + 1):
@@ -476,7 +479,7 @@ def solve(J, b, n):
             else:
                 for j in range(k + 1, n):
                     s -= J[_jx(k, j - k + KL, r)] * b[_ix(j, r)]
-            b[_ix(k, r)] = s / J[_jx(k, KL, r)]
+            b[_ix(k, r)] = s * J[_jx(k, KL, r)]
 
 
 @njit(cache=True, error_model="numpy")
