@@ -258,8 +258,8 @@ def test_bdf2_starts_each_fresh_state_with_an_sdirk2_step_then_uses_its_history(
 
 def test_uniform_rest_curvature_relaxes_to_a_circular_arc():
     kbar0 = 0.3
-    # water + damping to settle; Newton's tolerance (1e-6 m/s by default) far below the velocity
-    # asserted, which at the default sits between 0.5 and 3e-6 m/s from step to step once settled
+    # water + damping to settle; Newton's tolerance set far below the velocity asserted (at the
+    # default, 1e-6 m/s, the settled velocity wanders between 0.5 and 3e-6 m/s from step to step)
     sim = Simulator(
         SimConfig(
             rod=Rod(N=12, damping_bend=2.0, damping_stretch=2.0),
