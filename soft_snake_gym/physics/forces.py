@@ -111,6 +111,42 @@ def _drag_entry(ct, cn, gt, gn, dgt, dgn, vt, vn, ta, na, tb, nb):
     )
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def bending_blocks(J, j, be, g, u, ha, hb):
+    """Joint j's nine blocks of :func:`assemble`'s band: ``g_a u_b^T`` plus ``be`` times the edge-angle Hessians.
+
+    The Hessians' pattern over nodes (j-1, j, j+1): (0,0) -Ha, (0,1) and (1,0) Ha, (1,1) Hb - Ha,
+    (1,2) and (2,1) -Hb, (2,2) Hb.
+    """
+    g0x, g0y, g1x, g1y, g2x, g2y = g
+    u0x, u0y, u1x, u1y, u2x, u2y = u
+    ha00, ha01, ha11 = ha
+    hb00, hb01, hb11 = hb
+    m, b = j - 1, j + 1
+    add_block(
+        J, m, m, g0x * u0x - be * ha00, g0x * u0y - be * ha01, g0y * u0x - be * ha01, g0y * u0y - be * ha11
+    )
+    add_block(
+        J, m, j, g0x * u1x + be * ha00, g0x * u1y + be * ha01, g0y * u1x + be * ha01, g0y * u1y + be * ha11
+    )
+    add_block(J, m, b, g0x * u2x, g0x * u2y, g0y * u2x, g0y * u2y)
+    add_block(
+        J, j, m, g1x * u0x + be * ha00, g1x * u0y + be * ha01, g1y * u0x + be * ha01, g1y * u0y + be * ha11
+    )
+    add_block(J, j, j, g1x * u1x + be * (hb00 - ha00), g1x * u1y + be * (hb01 - ha01),
+              g1y * u1x + be * (hb01 - ha01), g1y * u1y + be * (hb11 - ha11))  # fmt: skip
+    add_block(
+        J, j, b, g1x * u2x - be * hb00, g1x * u2y - be * hb01, g1y * u2x - be * hb01, g1y * u2y - be * hb11
+    )
+    add_block(J, b, m, g2x * u0x, g2x * u0y, g2y * u0x, g2y * u0y)
+    add_block(
+        J, b, j, g2x * u1x - be * hb00, g2x * u1y - be * hb01, g2y * u1x - be * hb01, g2y * u1y - be * hb11
+    )
+    add_block(
+        J, b, b, g2x * u2x + be * hb00, g2x * u2y + be * hb01, g2y * u2x + be * hb01, g2y * u2y + be * hb11
+    )
+
+
 @njit(cache=True, error_model="numpy")
 def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
     """Add internal (elastic, damping) and, if ``water``, drag forces into F (2N,) [N].
@@ -184,6 +220,9 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
             ib = 1.0 / (lbn * lbn)
             ha00, ha01, ha11 = 2.0 * tax * tay * ia, (tay * tay - tax * tax) * ia, -2.0 * tax * tay * ia
             hb00, hb01, hb11 = 2.0 * tbx * tby * ib, (tby * tby - tbx * tbx) * ib, -2.0 * tbx * tby * ib
+            # block (a, b) is g_a u_b^T + beta (the Hessians' pattern), u_b = alpha g_b + c r_b
+            u0x, u0y, u1x, u1y = alpha * g0x, alpha * g0y, alpha * g1x, alpha * g1y
+            u2x, u2y = alpha * g2x, alpha * g2y
             if db > 0.0:
                 # r_{j-1} = Ha (v_j - v_{j-1}), r_{j+1} = Hb (v_{j+1} - v_j), r_j = -(the two)
                 ux, uy = v[2 * j] - v[2 * j - 2], v[2 * j + 1] - v[2 * j - 1]
@@ -192,79 +231,12 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
                 r2x, r2y = hb00 * wx + hb01 * wy, hb01 * wx + hb11 * wy
                 r1x, r1y = -r0x - r2x, -r0y - r2y
                 c = -cx * db * w * w
-                for a, gx, gy in ((j - 1, g0x, g0y), (j, g1x, g1y), (j + 1, g2x, g2y)):
-                    add_block(J, a, j - 1, c * gx * r0x, c * gx * r0y, c * gy * r0x, c * gy * r0y)
-                    add_block(J, a, j, c * gx * r1x, c * gx * r1y, c * gy * r1x, c * gy * r1y)
-                    add_block(J, a, j + 1, c * gx * r2x, c * gx * r2y, c * gy * r2x, c * gy * r2y)
-            # d2phi blocks: (0,0) -Ha, (0,1) Ha, (1,1) Hb - Ha, (1,2) -Hb, (2,2) Hb
-            add_block(
-                J,
-                j - 1,
-                j - 1,
-                alpha * g0x * g0x - beta * ha00,
-                alpha * g0x * g0y - beta * ha01,
-                alpha * g0y * g0x - beta * ha01,
-                alpha * g0y * g0y - beta * ha11,
-            )
-            add_block(
-                J,
-                j - 1,
-                j,
-                alpha * g0x * g1x + beta * ha00,
-                alpha * g0x * g1y + beta * ha01,
-                alpha * g0y * g1x + beta * ha01,
-                alpha * g0y * g1y + beta * ha11,
-            )
-            add_block(
-                J,
-                j,
-                j - 1,
-                alpha * g1x * g0x + beta * ha00,
-                alpha * g1x * g0y + beta * ha01,
-                alpha * g1y * g0x + beta * ha01,
-                alpha * g1y * g0y + beta * ha11,
-            )
-            add_block(
-                J, j - 1, j + 1, alpha * g0x * g2x, alpha * g0x * g2y, alpha * g0y * g2x, alpha * g0y * g2y
-            )
-            add_block(
-                J, j + 1, j - 1, alpha * g2x * g0x, alpha * g2x * g0y, alpha * g2y * g0x, alpha * g2y * g0y
-            )
-            add_block(
-                J,
-                j,
-                j,
-                alpha * g1x * g1x + beta * (hb00 - ha00),
-                alpha * g1x * g1y + beta * (hb01 - ha01),
-                alpha * g1y * g1x + beta * (hb01 - ha01),
-                alpha * g1y * g1y + beta * (hb11 - ha11),
-            )
-            add_block(
-                J,
-                j,
-                j + 1,
-                alpha * g1x * g2x - beta * hb00,
-                alpha * g1x * g2y - beta * hb01,
-                alpha * g1y * g2x - beta * hb01,
-                alpha * g1y * g2y - beta * hb11,
-            )
-            add_block(
-                J,
-                j + 1,
-                j,
-                alpha * g2x * g1x - beta * hb00,
-                alpha * g2x * g1y - beta * hb01,
-                alpha * g2y * g1x - beta * hb01,
-                alpha * g2y * g1y - beta * hb11,
-            )
-            add_block(
-                J,
-                j + 1,
-                j + 1,
-                alpha * g2x * g2x + beta * hb00,
-                alpha * g2x * g2y + beta * hb01,
-                alpha * g2y * g2x + beta * hb01,
-                alpha * g2y * g2y + beta * hb11,
+                u0x, u0y = u0x + c * r0x, u0y + c * r0y
+                u1x, u1y = u1x + c * r1x, u1y + c * r1y
+                u2x, u2y = u2x + c * r2x, u2y + c * r2y
+            g = (g0x, g0y, g1x, g1y, g2x, g2y)
+            bending_blocks(
+                J, j, beta, g, (u0x, u0y, u1x, u1y, u2x, u2y), (ha00, ha01, ha11), (hb00, hb01, hb11)
             )
     if not water:
         return 0.0

@@ -160,36 +160,35 @@ def _add_block(J, r, i, j, m00, m01, m10, m11):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _damping_blocks(J, r, a, j, cgx, cgy, r0x, r0y, r1x, r1y, r2x, r2y):
-    """Node j's bending-damping blocks ``c g_a r_b^T`` in node a's rows (``assemble``'s loop body).
-
-    Straight-line: a loop over a tuple of nodes, as in ``assemble``, keeps the lane loop scalar.
-    """
-    _add_block(J, r, a, j - 1, cgx * r0x, cgx * r0y, cgy * r0x, cgy * r0y)
-    _add_block(J, r, a, j, cgx * r1x, cgx * r1y, cgy * r1x, cgy * r1y)
-    _add_block(J, r, a, j + 1, cgx * r2x, cgx * r2y, cgy * r2x, cgy * r2y)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _bending_blocks(J, r, j, al, be, g0x, g0y, g1x, g1y, g2x, g2y, ha00, ha01, ha11, hb00, hb01, hb11):
-    """Node j's blocks ``alpha g_a g_b^T + beta (edge-angle Hessians)``, in ``assemble``'s order."""
+def _bending_blocks(J, r, j, be, g, u, ha, hb):
+    """``forces.bending_blocks`` for lane ``r`` of a flat band, in its order."""
+    g0x, g0y, g1x, g1y, g2x, g2y = g
+    u0x, u0y, u1x, u1y, u2x, u2y = u
+    ha00, ha01, ha11 = ha
+    hb00, hb01, hb11 = hb
     m, b = j - 1, j + 1
-    _add_block(J, r, m, m, al * g0x * g0x - be * ha00, al * g0x * g0y - be * ha01, al * g0y * g0x - be * ha01,
-               al * g0y * g0y - be * ha11)  # fmt: skip
-    _add_block(J, r, m, j, al * g0x * g1x + be * ha00, al * g0x * g1y + be * ha01, al * g0y * g1x + be * ha01,
-               al * g0y * g1y + be * ha11)  # fmt: skip
-    _add_block(J, r, j, m, al * g1x * g0x + be * ha00, al * g1x * g0y + be * ha01, al * g1y * g0x + be * ha01,
-               al * g1y * g0y + be * ha11)  # fmt: skip
-    _add_block(J, r, m, b, al * g0x * g2x, al * g0x * g2y, al * g0y * g2x, al * g0y * g2y)
-    _add_block(J, r, b, m, al * g2x * g0x, al * g2x * g0y, al * g2y * g0x, al * g2y * g0y)
-    _add_block(J, r, j, j, al * g1x * g1x + be * (hb00 - ha00), al * g1x * g1y + be * (hb01 - ha01),
-               al * g1y * g1x + be * (hb01 - ha01), al * g1y * g1y + be * (hb11 - ha11))  # fmt: skip
-    _add_block(J, r, j, b, al * g1x * g2x - be * hb00, al * g1x * g2y - be * hb01, al * g1y * g2x - be * hb01,
-               al * g1y * g2y - be * hb11)  # fmt: skip
-    _add_block(J, r, b, j, al * g2x * g1x - be * hb00, al * g2x * g1y - be * hb01, al * g2y * g1x - be * hb01,
-               al * g2y * g1y - be * hb11)  # fmt: skip
-    _add_block(J, r, b, b, al * g2x * g2x + be * hb00, al * g2x * g2y + be * hb01, al * g2y * g2x + be * hb01,
-               al * g2y * g2y + be * hb11)  # fmt: skip
+    _add_block(
+        J, r, m, m, g0x * u0x - be * ha00, g0x * u0y - be * ha01, g0y * u0x - be * ha01, g0y * u0y - be * ha11
+    )
+    _add_block(
+        J, r, m, j, g0x * u1x + be * ha00, g0x * u1y + be * ha01, g0y * u1x + be * ha01, g0y * u1y + be * ha11
+    )
+    _add_block(J, r, m, b, g0x * u2x, g0x * u2y, g0y * u2x, g0y * u2y)
+    _add_block(
+        J, r, j, m, g1x * u0x + be * ha00, g1x * u0y + be * ha01, g1y * u0x + be * ha01, g1y * u0y + be * ha11
+    )
+    _add_block(J, r, j, j, g1x * u1x + be * (hb00 - ha00), g1x * u1y + be * (hb01 - ha01),
+               g1y * u1x + be * (hb01 - ha01), g1y * u1y + be * (hb11 - ha11))  # fmt: skip
+    _add_block(
+        J, r, j, b, g1x * u2x - be * hb00, g1x * u2y - be * hb01, g1y * u2x - be * hb01, g1y * u2y - be * hb11
+    )
+    _add_block(J, r, b, m, g2x * u0x, g2x * u0y, g2y * u0x, g2y * u0y)
+    _add_block(
+        J, r, b, j, g2x * u1x - be * hb00, g2x * u1y - be * hb01, g2y * u1x - be * hb01, g2y * u1y - be * hb11
+    )
+    _add_block(
+        J, r, b, b, g2x * u2x + be * hb00, g2x * u2y + be * hb01, g2y * u2x + be * hb01, g2y * u2y + be * hb11
+    )
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -353,12 +352,10 @@ def _residual(x, p, dt, jac, res):
                 r2x, r2y = hb00 * wx + hb01 * wy, hb01 * wx + hb11 * wy
                 r1x, r1y = -r0x - r2x, -r0y - r2y
                 c = -cx * db * w * w
-                _damping_blocks(J, r, j - 1, j, c * g0x, c * g0y, r0x, r0y, r1x, r1y, r2x, r2y)
-                _damping_blocks(J, r, j, j, c * g1x, c * g1y, r0x, r0y, r1x, r1y, r2x, r2y)
-                _damping_blocks(J, r, j + 1, j, c * g2x, c * g2y, r0x, r0y, r1x, r1y, r2x, r2y)
-                _bending_blocks(
-                    J, r, j, alpha, beta, g0x, g0y, g1x, g1y, g2x, g2y, ha00, ha01, ha11, hb00, hb01, hb11
-                )
+                g = (g0x, g0y, g1x, g1y, g2x, g2y)
+                u = (alpha * g0x + c * r0x, alpha * g0y + c * r0y, alpha * g1x + c * r1x,
+                     alpha * g1y + c * r1y, alpha * g2x + c * r2x, alpha * g2y + c * r2y)  # fmt: skip
+                _bending_blocks(J, r, j, beta, g, u, (ha00, ha01, ha11), (hb00, hb01, hb11))
     for r in range(LANES):
         res[L_PFLUID, r] = 0.0
     for i in range(n2 // 2 - 1):  # drag
