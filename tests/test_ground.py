@@ -7,6 +7,7 @@ import pytest
 
 from soft_snake_gym import Ground, Integrator, SimConfig, Simulator, body_from_curvature
 from soft_snake_gym.gaits import length_wave, pulse_wave
+from soft_snake_gym.physics.forces import kinetic_friction
 
 G = Ground()
 
@@ -198,3 +199,29 @@ def test_backward_friction_lets_a_symmetric_wave_move_the_worm_forward():
     for direction in (1, -1):
         per_cycle, _ = inch(direction, ground=setae)
         assert per_cycle > 0.01 and per_cycle > 5 * abs(iso)
+
+
+@pytest.mark.parametrize("ground", [G, Ground(mu_forward=0.3, mu_backward=1.0, mu_lateral=0.6)])
+def test_kinetic_friction_velocity_derivative_matches_finite_differences(ground):
+    """Newton's friction rows: ``kinetic_friction``'s derivative by the node's velocity, against its force."""
+    sim = Simulator(SimConfig(medium="ground", ground=ground))
+    q, prm = sim.arrays.q.copy(), sim.arrays.prm
+    eps2 = (0.1 * ground.V_tol) ** 2
+    fn = sim.masses[1] * ground.g
+    rng = np.random.default_rng(0)
+    for speed in (3e-4, 0.02, 0.5):  # within friction's smoothing, and well beyond it
+        v = np.zeros_like(q)
+        v[2:4] = speed * rng.normal(size=2) / np.sqrt(2)
+        fx, fy, *d = kinetic_friction(q, v, 1, fn, eps2, prm)
+        fd = np.empty((2, 2))
+        h = 1e-6 * speed
+        for j in range(2):
+            vp, vm = v.copy(), v.copy()
+            vp[2 + j] += h
+            vm[2 + j] -= h
+            fd[:, j] = (
+                np.array(kinetic_friction(q, vp, 1, fn, eps2, prm)[:2])
+                - np.array(kinetic_friction(q, vm, 1, fn, eps2, prm)[:2])
+            ) / (2 * h)
+        assert np.hypot(fx, fy) > 0.1 * ground.mu_d * fn * min(1.0, speed / 1e-3)
+        np.testing.assert_allclose(np.reshape(d, (2, 2)), fd, rtol=1e-5, atol=1e-7 * np.abs(fd).max())

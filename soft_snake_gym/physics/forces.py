@@ -469,7 +469,7 @@ def actuator_power(q, kbar, lbar, u_k, u_l, prm, geo):
     return p
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def kinetic_friction(q, v, i, fn, eps2, prm):
     """Kinetic friction on sliding node i with normal load ``fn`` [N] and its velocity derivative.
 
@@ -484,17 +484,17 @@ def kinetic_friction(q, v, i, fn, eps2, prm):
         (fx, fy, d fx/d vx, d fx/d vy, d fy/d vx, d fy/d vy).
     """
     vx, vy = v[2 * i], v[2 * i + 1]
-    s = math.sqrt(vx * vx + vy * vy + eps2)
+    inv = 1.0 / math.sqrt(vx * vx + vy * vy + eps2)  # 1/s: one division, where six were
     if prm[P_ANISO] == 0.0:
-        c = prm[P_MUD] * fn
-        s3 = s * s * s
+        c = prm[P_MUD] * fn * inv  # mu_d fn / s
+        c3 = c * inv * inv  # mu_d fn / s^3
         return (
-            -c * vx / s,
-            -c * vy / s,
-            -c * (1.0 / s - vx * vx / s3),
-            c * vx * vy / s3,
-            c * vx * vy / s3,
-            -c * (1.0 / s - vy * vy / s3),
+            -c * vx,
+            -c * vy,
+            -c + c3 * vx * vx,
+            c3 * vx * vy,
+            c3 * vx * vy,
+            -c + c3 * vy * vy,
         )
     tx, ty = node_tangent(q, i)
     nx, ny = -ty, tx
@@ -502,18 +502,18 @@ def kinetic_friction(q, v, i, fn, eps2, prm):
     vn = vx * nx + vy * ny
     mt = prm[P_MU_FWD] if vt > 0.0 else prm[P_MU_BWD]
     mn = prm[P_MU_LAT]
-    gx = fn * (mt * vt * tx + mn * vn * nx)  # the friction force is -g / s
-    gy = fn * (mt * vt * ty + mn * vn * ny)
-    s3 = s * s * s
+    gx = fn * (mt * vt * tx + mn * vn * nx) * inv  # the friction force is -g / s
+    gy = fn * (mt * vt * ty + mn * vn * ny) * inv
+    inv2 = inv * inv
     # d(-g/s)/dv = -(fn (mt t t^T + mn n n^T)) / s + g v^T / s^3
-    a00 = fn * (mt * tx * tx + mn * nx * nx)
-    a01 = fn * (mt * tx * ty + mn * nx * ny)
-    a11 = fn * (mt * ty * ty + mn * ny * ny)
+    a00 = fn * (mt * tx * tx + mn * nx * nx) * inv
+    a01 = fn * (mt * tx * ty + mn * nx * ny) * inv
+    a11 = fn * (mt * ty * ty + mn * ny * ny) * inv
     return (
-        -gx / s,
-        -gy / s,
-        -a00 / s + gx * vx / s3,
-        -a01 / s + gx * vy / s3,
-        -a01 / s + gy * vx / s3,
-        -a11 / s + gy * vy / s3,
+        -gx,
+        -gy,
+        -a00 + gx * vx * inv2,
+        -a01 + gx * vy * inv2,
+        -a01 + gy * vx * inv2,
+        -a11 + gy * vy * inv2,
     )
