@@ -404,7 +404,7 @@ def _residual(x, p, dt, jac, res):
             e = R[_ix(i, r)] - p0[_ix(i, r)]
             R[_ix(i, r)] = e
             res[L_NORM2, r] += e * e
-            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) / m[_ix(i, r)])
+            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) * (1.0 / m[_ix(i, r)]))  # as _be_residual's B_MINV
 
 
 @njit(cache=True, error_model="numpy")

@@ -69,7 +69,9 @@ B_QPREV = 13
 # scratch: the edges' lengths and unit tangents of the current iterate (geometry.edge_geometry),
 # two rows from here (``buf[B_GEO : B_GEO + 2]``), computed once for the force kernels that use them
 B_GEO = 14
-N_BUF = 16
+# the reciprocals of the masses in B_M, set with them: Newton's max-norm |R|/m multiplies
+B_MINV = 16
+N_BUF = 17
 I_PIV, I_ORDER, I_FRICTION, I_SWITCHES = 0, 1, 2, 3
 N_IBUF = 4
 SLIDING, STUCK = 0, 1

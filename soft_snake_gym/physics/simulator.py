@@ -209,6 +209,7 @@ class Simulator:
         self._m = node_masses(config)
         self.arrays.buf[L.B_M, 0::2] = self._m
         self.arrays.buf[L.B_M, 1::2] = self._m
+        self.arrays.buf[L.B_MINV] = 1.0 / self.arrays.buf[L.B_M]
 
     @property
     def h(self) -> float:

@@ -39,6 +39,7 @@ from soft_snake_gym.physics.layout import (
     B_KEYS,
     B_LRATE,
     B_M,
+    B_MINV,
     B_P0,
     B_Q0,
     B_QPREV,
@@ -223,9 +224,10 @@ def _be_residual(s, dt, medium, jac):
                     add_block(J, i, i, -dt * d00, -dt * d01, -dt * d10, -dt * d11)
     norm2 = 0.0
     rmax = 0.0
+    minv = buf[B_MINV]
     for i in range(n):
         norm2 += R[i] * R[i]
-        rmax = max(rmax, abs(R[i]) / m[i])  # as a velocity: mass-independent tolerance
+        rmax = max(rmax, abs(R[i]) * minv[i])  # |R|/m, a velocity: mass-independent tolerance
     return norm2, rmax, p_fluid, p_fric
 
 
