@@ -127,7 +127,7 @@ def inch_observation(q, v, lbar, friction, ground, w, low, high, raw, out, geo):
     m = lbar.size
     geometry.edge_geometry(q, geo)  # one square root an edge for both blocks (libm's hypot is slower)
     for k in range(m):
-        raw[k] = geo[0, k]
+        raw[k] = geo[0, 2 * k]
         tx, ty = geo[1, 2 * k], geo[1, 2 * k + 1]
         raw[m + k] = tx * (v[2 * k + 2] - v[2 * k]) + ty * (v[2 * k + 3] - v[2 * k + 1])
         raw[2 * m + k] = lbar[k]

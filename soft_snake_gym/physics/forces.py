@@ -163,7 +163,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
     edge_geometry(q, geo)
     # stretching (docs/model.md §3): force on x[k+1] is -EA (|e|/lbar - 1) t
     for k in range(N - 1):
-        l, tx, ty = geo[0, k], geo[1, 2 * k], geo[1, 2 * k + 1]
+        l, tx, ty = geo[0, 2 * k], geo[1, 2 * k], geo[1, 2 * k + 1]
         lb = lbar[k]
         strain = l / lb - 1.0
         f = -EA * strain
@@ -179,14 +179,15 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
         if jac:
             # -dF_{k+1}/dx_{k+1} = EA t t^T / lbar - f/l (I - t t^T) + d t p^T, with the
             # turning of the stretch rate p = d ldot / d x_{k+1} = (dv - ldot t) / l
+            il = geo[0, 2 * k + 1]  # 1/l
             a1 = EA / lb
-            a2 = -f / l
+            a2 = -f * il
             s00 = cx * (a1 * tx * tx + a2 * (1.0 - tx * tx)) + cv * d * tx * tx
             s01 = cx * (a1 - a2) * tx * ty + cv * d * tx * ty
             s11 = cx * (a1 * ty * ty + a2 * (1.0 - ty * ty)) + cv * d * ty * ty
             add_edge_pattern(J, k, s00, s01, s11)
             if d > 0.0:
-                px, py = cx * d * (dvx - ldot * tx) / l, cx * d * (dvy - ldot * ty) / l
+                px, py = cx * d * (dvx - ldot * tx) * il, cx * d * (dvy - ldot * ty) * il
                 t00, t01, t10, t11 = tx * px, tx * py, ty * px, ty * py
                 add_block(J, k, k, -t00, -t01, -t10, -t11)
                 add_block(J, k, k + 1, t00, t01, t10, t11)
@@ -194,7 +195,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
                 add_block(J, k + 1, k + 1, -t00, -t01, -t10, -t11)
     # bending (docs/model.md §3): F = -(EI/lvor)(kappa - kbar)(1 + kappa^2/4) d phi/d x
     for j in range(1, N - 1):
-        kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = turning_at(geo, j)
+        kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, ila, ilb = turning_at(geo, j)
         kb = EI / (0.5 * (lbar[j - 1] + lbar[j]))
         dk = kap - kbar[j - 1]
         w = 1.0 + 0.25 * kap * kap
@@ -216,8 +217,8 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
             s2 = kb * (w * w + dk * 0.5 * kap * w) + db * w * w * kap * phidot
             alpha = -(cx * s2 + cv * db * w * w)
             beta = -cx * (kb * dk * w + db * w * w * phidot)
-            ia = 1.0 / (la * la)
-            ib = 1.0 / (lbn * lbn)
+            ia = ila * ila
+            ib = ilb * ilb
             ha00, ha01, ha11 = 2.0 * tax * tay * ia, (tay * tay - tax * tax) * ia, -2.0 * tax * tay * ia
             hb00, hb01, hb11 = 2.0 * tbx * tby * ib, (tby * tby - tbx * tbx) * ib, -2.0 * tbx * tby * ib
             # block (a, b) is g_a u_b^T + beta (the Hessians' pattern), u_b = alpha g_b + c r_b
@@ -464,7 +465,7 @@ def actuator_power(q, kbar, lbar, u_k, u_l, prm, geo):
         p -= EI / lv * dk * u_k[j - 1]
         p -= 0.25 * EI * dk * dk / (lv * lv) * (u_l[j - 1] + u_l[j])
     for k in range(N - 1):
-        r = geo[0, k] / lbar[k]
+        r = geo[0, 2 * k] / lbar[k]
         p -= 0.5 * EA * (r * r - 1.0) * u_l[k]
     return p
 

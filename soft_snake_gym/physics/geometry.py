@@ -18,53 +18,61 @@ def turning(q, j):
     """Turning quantities at interior node j (docs/model.md §2).
 
     Returns:
-        (kappa, g0x, g0y, g1x, g1y, g2x, g2y, ta, tb, la, lb) packed as: kappa, the gradient
-        d phi / d x of nodes j-1, j, j+1, and the unit tangents and lengths of both edges.
+        (kappa, g0x, g0y, g1x, g1y, g2x, g2y, ta, tb, 1/la, 1/lb) packed as: kappa, the gradient
+        d phi / d x of nodes j-1, j, j+1, and the unit tangents and reciprocal lengths of both edges.
     """
     ax = q[2 * j] - q[2 * j - 2]
     ay = q[2 * j + 1] - q[2 * j - 1]
     bx = q[2 * j + 2] - q[2 * j]
     by = q[2 * j + 3] - q[2 * j + 1]
-    la = math.sqrt(ax * ax + ay * ay)
-    lb = math.sqrt(bx * bx + by * by)
-    return _turning_of(la, ax / la, ay / la, lb, bx / lb, by / lb)
+    ia = 1.0 / math.sqrt(ax * ax + ay * ay)
+    ib = 1.0 / math.sqrt(bx * bx + by * by)
+    return _turning_of(ia, ax * ia, ay * ia, ib, bx * ib, by * ib)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def turning_at(geo, j):
     """:func:`turning` from the edge geometry ``geo`` of :func:`edge_geometry` (bit for bit the same)."""
     return _turning_of(
-        geo[0, j - 1], geo[1, 2 * j - 2], geo[1, 2 * j - 1], geo[0, j], geo[1, 2 * j], geo[1, 2 * j + 1]
+        geo[0, 2 * j - 1],
+        geo[1, 2 * j - 2],
+        geo[1, 2 * j - 1],
+        geo[0, 2 * j + 1],
+        geo[1, 2 * j],
+        geo[1, 2 * j + 1],
     )
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _turning_of(la, tax, tay, lb, tbx, tby):
-    """:func:`turning`'s quantities from the lengths and unit tangents of the node's two edges."""
+def _turning_of(ia, tax, tay, ib, tbx, tby):
+    """:func:`turning`'s quantities from the reciprocal lengths and unit tangents of the node's two edges."""
     cross = tax * tby - tay * tbx
     dot = tax * tbx + tay * tby
     kappa = 2.0 * cross / (1.0 + dot)
     # n = (-t_y, t_x); d phi/d x_{j-1} = n_a/l_a, d phi/d x_{j+1} = n_b/l_b
-    g0x, g0y = -tay / la, tax / la
-    g2x, g2y = -tby / lb, tbx / lb
-    return kappa, g0x, g0y, -g0x - g2x, -g0y - g2y, g2x, g2y, tax, tay, tbx, tby, la, lb
+    g0x, g0y = -tay * ia, tax * ia
+    g2x, g2y = -tby * ib, tbx * ib
+    return kappa, g0x, g0y, -g0x - g2x, -g0y - g2y, g2x, g2y, tax, tay, tbx, tby, ia, ib
 
 
 @njit(cache=True, error_model="numpy")
 def edge_geometry(q, geo):
-    """Every edge's length and unit tangent, once for the kernels that need them many times.
+    """Every edge's length, its reciprocal and unit tangent, once for the kernels that need them many times.
 
-    Writes ``geo[0, k]`` = ``l_k`` [m] and ``geo[1, 2k:2k+2]`` = ``t_k`` for the N-1 edges of
-    ``q`` (``geo``: at least (2, 2N-2)). :func:`turning_at` and :func:`edge_frame_at` read them and
+    Writes ``geo[0, 2k:2k+2]`` = (``l_k`` [m], ``1/l_k``) and ``geo[1, 2k:2k+2]`` = ``t_k`` for the
+    N-1 edges of ``q`` (``geo``: at least (2, 2N-2)); one division an edge, the kernels multiply
+    by the reciprocal. :func:`turning_at` and :func:`edge_frame_at` read them and
     give bit for bit what :func:`turning` and :func:`edge_frame` compute from ``q``.
     """
     for k in range(q.size // 2 - 1):
         ex = q[2 * k + 2] - q[2 * k]
         ey = q[2 * k + 3] - q[2 * k + 1]
         l = math.sqrt(ex * ex + ey * ey)
-        geo[0, k] = l
-        geo[1, 2 * k] = ex / l
-        geo[1, 2 * k + 1] = ey / l
+        il = 1.0 / l
+        geo[0, 2 * k] = l
+        geo[0, 2 * k + 1] = il
+        geo[1, 2 * k] = ex * il
+        geo[1, 2 * k + 1] = ey * il
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -94,13 +102,14 @@ def edge_frame(q, v, i):
     ex = q[2 * i + 2] - q[2 * i]
     ey = q[2 * i + 3] - q[2 * i + 1]
     l = math.sqrt(ex * ex + ey * ey)
-    return _frame_of(l, ex / l, ey / l, v, i)
+    il = 1.0 / l
+    return _frame_of(l, ex * il, ey * il, v, i)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def edge_frame_at(geo, v, i):
     """:func:`edge_frame` from the edge geometry ``geo`` of :func:`edge_geometry` (bit for bit the same)."""
-    return _frame_of(geo[0, i], geo[1, 2 * i], geo[1, 2 * i + 1], v, i)
+    return _frame_of(geo[0, 2 * i], geo[1, 2 * i], geo[1, 2 * i + 1], v, i)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

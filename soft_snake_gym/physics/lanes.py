@@ -98,7 +98,7 @@ class Block(NamedTuple):
     stage's start ``q0``, ``v0``, the water's momentum there ``p0``, the step's start velocity
     ``vstep``, the forces ``F``, residual ``R`` and ``A`` (``buf``'s rows of those names), the
     rest shape ``kbar``, ``lbar``, the inputs ``uk`` and the length rates ``lrate``, and the
-    edges' lengths and unit tangents ``E`` (three rows an edge; ``buf[B_GEO]``). ``fext`` and
+    edges' lengths, their reciprocals and unit tangents ``E`` (four rows an edge; ``buf[B_GEO]``). ``fext`` and
     ``m`` are copied in only. The rest is work: the band ``J``, Newton's ``vacc``, ``dv`` and
     the stage's first guess ``guess``; :func:`newton`'s per-lane residual figures ``res``,
     ``res1``, the lanes whose factors kept their rows ``kept``, the lanes on the common path
@@ -200,21 +200,23 @@ def _momentum_block(J, r, a, b, sa, sb, nx, ny, parts):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _edge_geometry(q, E, n2):
-    """``geometry.edge_geometry`` for every lane: edge k's length and unit tangent at ``E`` rows 3k .. 3k+2."""
+    """``geometry.edge_geometry`` for every lane: edge k's length, its reciprocal and unit tangent at ``E`` rows 4k .. 4k+3."""
     for k in range(n2 // 2 - 1):
         for r in range(LANES):
             ex = q[_ix(2 * k + 2, r)] - q[_ix(2 * k, r)]
             ey = q[_ix(2 * k + 3, r)] - q[_ix(2 * k + 1, r)]
             l = math.sqrt(ex * ex + ey * ey)
-            E[_ix(3 * k, r)] = l
-            E[_ix(3 * k + 1, r)] = ex / l
-            E[_ix(3 * k + 2, r)] = ey / l
+            il = 1.0 / l
+            E[_ix(4 * k, r)] = l
+            E[_ix(4 * k + 1, r)] = il
+            E[_ix(4 * k + 2, r)] = ex * il
+            E[_ix(4 * k + 3, r)] = ey * il
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _edge(E, v, i, r):
     """``geometry.edge_frame_at`` for edge i of lane r: (l, tx, ty, nx, ny, vx, vy, vt, vn)."""
-    l, tx, ty = E[_ix(3 * i, r)], E[_ix(3 * i + 1, r)], E[_ix(3 * i + 2, r)]
+    l, tx, ty = E[_ix(4 * i, r)], E[_ix(4 * i + 2, r)], E[_ix(4 * i + 3, r)]
     nx, ny = -ty, tx
     vx = 0.5 * (v[_ix(2 * i, r)] + v[_ix(2 * i + 2, r)])
     vy = 0.5 * (v[_ix(2 * i + 1, r)] + v[_ix(2 * i + 3, r)])
@@ -224,9 +226,14 @@ def _edge(E, v, i, r):
 @njit(cache=True, inline="always", error_model="numpy")
 def _turning(E, j, r):
     """``geometry.turning_at`` at node j of lane r: ``_turning_of`` the node's two edges."""
-    a, b = 3 * (j - 1), 3 * j
+    a, b = 4 * (j - 1), 4 * j
     return _turning_of(
-        E[_ix(a, r)], E[_ix(a + 1, r)], E[_ix(a + 2, r)], E[_ix(b, r)], E[_ix(b + 1, r)], E[_ix(b + 2, r)]
+        E[_ix(a + 1, r)],
+        E[_ix(a + 2, r)],
+        E[_ix(a + 3, r)],
+        E[_ix(b + 1, r)],
+        E[_ix(b + 2, r)],
+        E[_ix(b + 3, r)],
     )
 
 
@@ -299,7 +306,7 @@ def _residual(x, p, dt, jac, res):
         J[:] = 0.0
     for k in range(n2 // 2 - 1):  # stretching
         for r in range(LANES):
-            l, tx, ty = E[_ix(3 * k, r)], E[_ix(3 * k + 1, r)], E[_ix(3 * k + 2, r)]
+            l, tx, ty = E[_ix(4 * k, r)], E[_ix(4 * k + 2, r)], E[_ix(4 * k + 3, r)]
             lb, EA, d = lbar[_ix(k, r)], p[L_EA, r], p[L_D, r]
             f = -EA * (l / lb - 1.0)
             dvx, dvy = v[_ix(2 * k + 2, r)] - v[_ix(2 * k, r)], v[_ix(2 * k + 3, r)] - v[_ix(2 * k + 1, r)]
@@ -310,7 +317,8 @@ def _residual(x, p, dt, jac, res):
             F[_ix(2 * k, r)] -= f * tx
             F[_ix(2 * k + 1, r)] -= f * ty
             if jac:
-                a1, a2 = EA / lb, -f / l
+                il = E[_ix(4 * k + 1, r)]
+                a1, a2 = EA / lb, -f * il
                 s00 = cx * (a1 * tx * tx + a2 * (1.0 - tx * tx)) + cv * d * tx * tx
                 s01 = cx * (a1 - a2) * tx * ty + cv * d * tx * ty
                 s11 = cx * (a1 * ty * ty + a2 * (1.0 - ty * ty)) + cv * d * ty * ty
@@ -318,7 +326,7 @@ def _residual(x, p, dt, jac, res):
                 _add_block(J, r, k, k + 1, s00, s01, s01, s11)
                 _add_block(J, r, k + 1, k, s00, s01, s01, s11)
                 _add_block(J, r, k + 1, k + 1, -s00, -s01, -s01, -s11)
-                px, py = cx * d * (dvx - ldot * tx) / l, cx * d * (dvy - ldot * ty) / l
+                px, py = cx * d * (dvx - ldot * tx) * il, cx * d * (dvy - ldot * ty) * il
                 t00, t01, t10, t11 = tx * px, tx * py, ty * px, ty * py
                 _add_block(J, r, k, k, -t00, -t01, -t10, -t11)
                 _add_block(J, r, k, k + 1, t00, t01, t10, t11)
@@ -326,7 +334,7 @@ def _residual(x, p, dt, jac, res):
                 _add_block(J, r, k + 1, k + 1, -t00, -t01, -t10, -t11)
     for j in range(1, n2 // 2 - 1):  # bending
         for r in range(LANES):
-            kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, la, lbn = _turning(E, j, r)
+            kap, g0x, g0y, g1x, g1y, g2x, g2y, tax, tay, tbx, tby, ila, ilb = _turning(E, j, r)
             kb = p[L_EI, r] / (0.5 * (lbar[_ix(j - 1, r)] + lbar[_ix(j, r)]))
             dk = kap - kbar[_ix(j - 1, r)]
             w = 1.0 + 0.25 * kap * kap
@@ -343,7 +351,7 @@ def _residual(x, p, dt, jac, res):
                 s2 = kb * (w * w + dk * 0.5 * kap * w) + db * w * w * kap * phidot
                 alpha = -(cx * s2 + cv * db * w * w)
                 beta = -cx * (kb * dk * w + db * w * w * phidot)
-                ia, ib = 1.0 / (la * la), 1.0 / (lbn * lbn)
+                ia, ib = ila * ila, ilb * ilb
                 ha00, ha01, ha11 = 2.0 * tax * tay * ia, (tay * tay - tax * tax) * ia, -2.0 * tax * tay * ia
                 hb00, hb01, hb11 = 2.0 * tbx * tby * ib, (tby * tby - tbx * tbx) * ib, -2.0 * tbx * tby * ib
                 ux, uy = v[_ix(2 * j, r)] - v[_ix(2 * j - 2, r)], v[_ix(2 * j + 1, r)] - v[_ix(2 * j - 1, r)]
@@ -485,7 +493,7 @@ def allocate(n2):
     n, N = n2 * LANES, n2 // 2
     z = np.zeros
     return Block(z(n), z(n), z(n), z(n), z(n), z(n), z(n), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n),
-                 z(n), z(n2 * WIDTH * LANES), z(n), z(n), z(3 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
+                 z(n), z(n2 * WIDTH * LANES), z(n), z(n), z(4 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
                  z((N_LANE_RES, LANES)), z(LANES, dtype=np.bool_), z(LANES, dtype=np.bool_),
                  z(LANES, dtype=np.int64), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z((2, LANES)), z(2 * (N - 2) * LANES),
                  z((3, LANES)))  # fmt: skip
@@ -552,9 +560,10 @@ def put(s, i, x, r, v):
     for k in range(s.kbar.shape[1]):
         s.kbar[i, k] = x.kbar[_ix(k, r)]
     for k in range(n2 // 2 - 1):
-        buf[B_GEO, k] = x.E[_ix(3 * k, r)]
-        buf[B_GEO + 1, 2 * k] = x.E[_ix(3 * k + 1, r)]
-        buf[B_GEO + 1, 2 * k + 1] = x.E[_ix(3 * k + 2, r)]
+        buf[B_GEO, 2 * k] = x.E[_ix(4 * k, r)]
+        buf[B_GEO, 2 * k + 1] = x.E[_ix(4 * k + 1, r)]
+        buf[B_GEO + 1, 2 * k] = x.E[_ix(4 * k + 2, r)]
+        buf[B_GEO + 1, 2 * k + 1] = x.E[_ix(4 * k + 3, r)]
 
 
 @njit(cache=True, error_model="numpy")
@@ -637,7 +646,7 @@ def stage_end(x, p, stage):
             power[0, r] -= 0.25 * EI * dk * dk / (lv * lv) * (lrate[_ix(j - 1, r)] + lrate[_ix(j, r)])
     for k in range(N - 1):
         for r in range(LANES):
-            ratio = E[_ix(3 * k, r)] / lbar[_ix(k, r)]
+            ratio = E[_ix(4 * k, r)] / lbar[_ix(k, r)]
             power[0, r] -= 0.5 * p[L_EA, r] * (ratio * ratio - 1.0) * lrate[_ix(k, r)]
     for k in range(N - 1):
         for r in range(LANES):
@@ -685,7 +694,7 @@ def energies(x, p):
             energy[0, r] += 0.5 * m[_ix(i, r)] * v[_ix(i, r)] * v[_ix(i, r)]
     for k in range(N - 1):
         for r in range(LANES):
-            s = E[_ix(3 * k, r)] / lbar[_ix(k, r)] - 1.0
+            s = E[_ix(4 * k, r)] / lbar[_ix(k, r)] - 1.0
             energy[1, r] += 0.5 * p[L_EA, r] * s * s * lbar[_ix(k, r)]
     for j in range(1, N - 1):
         for r in range(LANES):
@@ -698,7 +707,7 @@ def energies(x, p):
             vx = 0.5 * (v[_ix(2 * i, r)] + v[_ix(2 * i + 2, r)])
             vy = 0.5 * (v[_ix(2 * i + 1, r)] + v[_ix(2 * i + 3, r)])
             w = vy * ex - vx * ey  # l v_n
-            energy[2, r] += 0.5 * p[L_CM, r] * w * w / E[_ix(3 * i, r)]
+            energy[2, r] += 0.5 * p[L_CM, r] * w * w / E[_ix(4 * i, r)]
 
 
 @njit(cache=True, inline="always")

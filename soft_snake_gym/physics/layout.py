@@ -66,8 +66,9 @@ B_LRATE = 12
 # state: the position at the start of the last step (BDF2's history; NaN, set by
 # Simulator.set_state, while there is none)
 B_QPREV = 13
-# scratch: the edges' lengths and unit tangents of the current iterate (geometry.edge_geometry),
-# two rows from here (``buf[B_GEO : B_GEO + 2]``), computed once for the force kernels that use them
+# scratch: the edges' lengths with their reciprocals and their unit tangents of the current iterate
+# (geometry.edge_geometry), two rows from here (``buf[B_GEO : B_GEO + 2]``), computed once for the
+# force kernels that use them
 B_GEO = 14
 # the reciprocals of the masses in B_M, set with them: Newton's max-norm |R|/m multiplies
 B_MINV = 16
