@@ -112,38 +112,33 @@ def _drag_entry(ct, cn, gt, gn, dgt, dgn, vt, vn, ta, na, tb, nb):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def bending_blocks(J, j, be, g, u, ha, hb):
-    """Joint j's nine blocks of :func:`assemble`'s band: ``g_a u_b^T`` plus ``be`` times the edge-angle Hessians.
+def bending_blocks(be, g, u, ha, hb):
+    """A joint's nine 2x2 blocks of :func:`assemble`'s band: ``g_a u_b^T`` plus ``be`` times the edge-angle Hessians.
 
-    The Hessians' pattern over nodes (j-1, j, j+1): (0,0) -Ha, (0,1) and (1,0) Ha, (1,1) Hb - Ha,
-    (1,2) and (2,1) -Hb, (2,2) Hb.
+    Block ``k`` couples node ``j - 1 + k // 3`` (rows) with node ``j - 1 + k % 3`` (columns), as
+    (m00, m01, m10, m11). The Hessians' pattern over nodes (j-1, j, j+1): (0,0) -Ha, (0,1) and
+    (1,0) Ha, (1,1) Hb - Ha, (1,2) and (2,1) -Hb, (2,2) Hb. The lanes add the same blocks in
+    the same order (``lanes._residual``).
     """
     g0x, g0y, g1x, g1y, g2x, g2y = g
     u0x, u0y, u1x, u1y, u2x, u2y = u
     ha00, ha01, ha11 = ha
     hb00, hb01, hb11 = hb
-    m, b = j - 1, j + 1
-    add_block(
-        J, m, m, g0x * u0x - be * ha00, g0x * u0y - be * ha01, g0y * u0x - be * ha01, g0y * u0y - be * ha11
-    )
-    add_block(
-        J, m, j, g0x * u1x + be * ha00, g0x * u1y + be * ha01, g0y * u1x + be * ha01, g0y * u1y + be * ha11
-    )
-    add_block(J, m, b, g0x * u2x, g0x * u2y, g0y * u2x, g0y * u2y)
-    add_block(
-        J, j, m, g1x * u0x + be * ha00, g1x * u0y + be * ha01, g1y * u0x + be * ha01, g1y * u0y + be * ha11
-    )
-    add_block(J, j, j, g1x * u1x + be * (hb00 - ha00), g1x * u1y + be * (hb01 - ha01),
-              g1y * u1x + be * (hb01 - ha01), g1y * u1y + be * (hb11 - ha11))  # fmt: skip
-    add_block(
-        J, j, b, g1x * u2x - be * hb00, g1x * u2y - be * hb01, g1y * u2x - be * hb01, g1y * u2y - be * hb11
-    )
-    add_block(J, b, m, g2x * u0x, g2x * u0y, g2y * u0x, g2y * u0y)
-    add_block(
-        J, b, j, g2x * u1x - be * hb00, g2x * u1y - be * hb01, g2y * u1x - be * hb01, g2y * u1y - be * hb11
-    )
-    add_block(
-        J, b, b, g2x * u2x + be * hb00, g2x * u2y + be * hb01, g2y * u2x + be * hb01, g2y * u2y + be * hb11
+    return (
+        (g0x * u0x - be * ha00, g0x * u0y - be * ha01, g0y * u0x - be * ha01, g0y * u0y - be * ha11),
+        (g0x * u1x + be * ha00, g0x * u1y + be * ha01, g0y * u1x + be * ha01, g0y * u1y + be * ha11),
+        (g0x * u2x, g0x * u2y, g0y * u2x, g0y * u2y),
+        (g1x * u0x + be * ha00, g1x * u0y + be * ha01, g1y * u0x + be * ha01, g1y * u0y + be * ha11),
+        (
+            g1x * u1x + be * (hb00 - ha00),
+            g1x * u1y + be * (hb01 - ha01),
+            g1y * u1x + be * (hb01 - ha01),
+            g1y * u1y + be * (hb11 - ha11),
+        ),
+        (g1x * u2x - be * hb00, g1x * u2y - be * hb01, g1y * u2x - be * hb01, g1y * u2y - be * hb11),
+        (g2x * u0x, g2x * u0y, g2y * u0x, g2y * u0y),
+        (g2x * u1x - be * hb00, g2x * u1y - be * hb01, g2y * u1x - be * hb01, g2y * u1y - be * hb11),
+        (g2x * u2x + be * hb00, g2x * u2y + be * hb01, g2y * u2x + be * hb01, g2y * u2y + be * hb11),
     )
 
 
@@ -235,10 +230,11 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
                 u0x, u0y = u0x + c * r0x, u0y + c * r0y
                 u1x, u1y = u1x + c * r1x, u1y + c * r1y
                 u2x, u2y = u2x + c * r2x, u2y + c * r2y
-            g = (g0x, g0y, g1x, g1y, g2x, g2y)
-            bending_blocks(
-                J, j, beta, g, (u0x, u0y, u1x, u1y, u2x, u2y), (ha00, ha01, ha11), (hb00, hb01, hb11)
-            )
+            g, u = (g0x, g0y, g1x, g1y, g2x, g2y), (u0x, u0y, u1x, u1y, u2x, u2y)
+            blocks = bending_blocks(beta, g, u, (ha00, ha01, ha11), (hb00, hb01, hb11))
+            for k in range(9):
+                m00, m01, m10, m11 = blocks[k]
+                add_block(J, j - 1 + k // 3, j - 1 + k % 3, m00, m01, m10, m11)
     if not water:
         return 0.0
     # drag (docs/model.md §4): F = -c_t l (v_t + v_t|v_t|) t - c_n l (v_n + v_n|v_n|) n, half per node

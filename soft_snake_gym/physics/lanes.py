@@ -160,38 +160,6 @@ def _add_block(J, r, i, j, m00, m01, m10, m11):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _bending_blocks(J, r, j, be, g, u, ha, hb):
-    """``forces.bending_blocks`` for lane ``r`` of a flat band, in its order."""
-    g0x, g0y, g1x, g1y, g2x, g2y = g
-    u0x, u0y, u1x, u1y, u2x, u2y = u
-    ha00, ha01, ha11 = ha
-    hb00, hb01, hb11 = hb
-    m, b = j - 1, j + 1
-    _add_block(
-        J, r, m, m, g0x * u0x - be * ha00, g0x * u0y - be * ha01, g0y * u0x - be * ha01, g0y * u0y - be * ha11
-    )
-    _add_block(
-        J, r, m, j, g0x * u1x + be * ha00, g0x * u1y + be * ha01, g0y * u1x + be * ha01, g0y * u1y + be * ha11
-    )
-    _add_block(J, r, m, b, g0x * u2x, g0x * u2y, g0y * u2x, g0y * u2y)
-    _add_block(
-        J, r, j, m, g1x * u0x + be * ha00, g1x * u0y + be * ha01, g1y * u0x + be * ha01, g1y * u0y + be * ha11
-    )
-    _add_block(J, r, j, j, g1x * u1x + be * (hb00 - ha00), g1x * u1y + be * (hb01 - ha01),
-               g1y * u1x + be * (hb01 - ha01), g1y * u1y + be * (hb11 - ha11))  # fmt: skip
-    _add_block(
-        J, r, j, b, g1x * u2x - be * hb00, g1x * u2y - be * hb01, g1y * u2x - be * hb01, g1y * u2y - be * hb11
-    )
-    _add_block(J, r, b, m, g2x * u0x, g2x * u0y, g2y * u0x, g2y * u0y)
-    _add_block(
-        J, r, b, j, g2x * u1x - be * hb00, g2x * u1y - be * hb01, g2y * u1x - be * hb01, g2y * u1y - be * hb11
-    )
-    _add_block(
-        J, r, b, b, g2x * u2x + be * hb00, g2x * u2y + be * hb01, g2y * u2x + be * hb01, g2y * u2y + be * hb11
-    )
-
-
-@njit(cache=True, inline="always", error_model="numpy")
 def _momentum_block(J, r, a, b, sa, sb, nx, ny, parts):
     """``fluid_momentum``'s block (a, b) of one edge for lane r (sa, sb: -1 or 1)."""
     m00, m01, m10, m11 = forces.momentum_block(sa, sb, nx, ny, parts)
@@ -363,7 +331,10 @@ def _residual(x, p, dt, jac, res):
                 g = (g0x, g0y, g1x, g1y, g2x, g2y)
                 u = (alpha * g0x + c * r0x, alpha * g0y + c * r0y, alpha * g1x + c * r1x,
                      alpha * g1y + c * r1y, alpha * g2x + c * r2x, alpha * g2y + c * r2y)  # fmt: skip
-                _bending_blocks(J, r, j, beta, g, u, (ha00, ha01, ha11), (hb00, hb01, hb11))
+                blocks = forces.bending_blocks(beta, g, u, (ha00, ha01, ha11), (hb00, hb01, hb11))
+                for k in range(9):
+                    m00, m01, m10, m11 = blocks[k]
+                    _add_block(J, r, j - 1 + k // 3, j - 1 + k % 3, m00, m01, m10, m11)
     for r in range(LANES):
         res[L_PFLUID, r] = 0.0
     for i in range(n2 // 2 - 1):  # drag
