@@ -481,18 +481,9 @@ def kinetic_friction(q, v, i, fn, eps2, prm):
         (fx, fy, d fx/d vx, d fx/d vy, d fy/d vx, d fy/d vy).
     """
     vx, vy = v[2 * i], v[2 * i + 1]
-    inv = 1.0 / math.sqrt(vx * vx + vy * vy + eps2)  # 1/s: one division, where six were
     if prm[P_ANISO] == 0.0:
-        c = prm[P_MUD] * fn * inv  # mu_d fn / s
-        c3 = c * inv * inv  # mu_d fn / s^3
-        return (
-            -c * vx,
-            -c * vy,
-            -c + c3 * vx * vx,
-            c3 * vx * vy,
-            c3 * vx * vy,
-            -c + c3 * vy * vy,
-        )
+        return isotropic_friction(vx, vy, prm[P_MUD] * fn, eps2)
+    inv = 1.0 / math.sqrt(vx * vx + vy * vy + eps2)  # 1/s: one division, where six were
     tx, ty = node_tangent(q, i)
     nx, ny = -ty, tx
     vt = vx * tx + vy * ty
@@ -513,4 +504,20 @@ def kinetic_friction(q, v, i, fn, eps2, prm):
         -a01 + gx * vy * inv2,
         -a01 + gy * vx * inv2,
         -a11 + gy * vy * inv2,
+    )
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def isotropic_friction(vx, vy, mufn, eps2):
+    """:func:`kinetic_friction` with one coefficient: ``-mufn v / s`` for ``mufn = mu_d fn``, and its derivative."""
+    inv = 1.0 / math.sqrt(vx * vx + vy * vy + eps2)  # 1/s: one division, where six were
+    c = mufn * inv  # mu_d fn / s
+    c3 = c * inv * inv  # mu_d fn / s^3
+    return (
+        -c * vx,
+        -c * vy,
+        -c + c3 * vx * vx,
+        c3 * vx * vy,
+        c3 * vx * vy,
+        -c + c3 * vy * vy,
     )

@@ -208,13 +208,17 @@ def _be_residual(s, dt, medium, jac):
         for i in range(n // 2):
             r0, r1 = 2 * i, 2 * i + 1
             if state[i] == STUCK:
+                # held at rest: R = v (= 0: a node sticks at 0 and its Newton updates are -0). Its
+                # rows keep their assembled diagonal, where a 1 against the elastic entries
+                # below it would make the factorization exchange rows; the update is 0 either way
                 R[r0] = v[r0]
                 R[r1] = v[r1]
                 if jac:
+                    d0, d1 = J[r0, KL], J[r1, KL]
                     J[r0, :] = 0.0
                     J[r1, :] = 0.0
-                    J[r0, KL] = 1.0
-                    J[r1, KL] = 1.0
+                    J[r0, KL] = d0
+                    J[r1, KL] = d1
             else:
                 fx, fy, d00, d01, d10, d11 = kinetic_friction(q, v, i, m[r0] * prm[P_G], eps2, prm)
                 R[r0] -= dt * fx
@@ -763,6 +767,38 @@ def _bdf2_substep(s, dt, medium):
 
 
 @njit(cache=True, error_model="numpy")
+def move_rest_shape(s, u_k, u_l, dt):
+    """The start of an integrator's sub-step of ``dt``: the actuator power, then the rest shape moved.
+
+    Returns (status, the actuator power at the start): ``BAD_REST_LENGTH`` if a rest length
+    ends <= 0. Leaves the edge geometry of ``q`` in ``buf[B_GEO]``. The inputs' work over the
+    sub-step is the trapezoidal rule on ``P_act`` (with :func:`implicit_energies`' power at the
+    end): exact for a body that lags the rest shape and for one that follows it at once, where a
+    one-point rule charges inputs that reverse every step with work never done.
+    """
+    q, kbar, lbar, prm, buf = s.q, s.kbar, s.lbar, s.prm, s.buf
+    lrate, geo = buf[B_LRATE, : lbar.size], buf[B_GEO : B_GEO + 2]
+    edge_geometry(q, geo)
+    p_act0 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
+    return _move_rest_shape(kbar, lbar, lrate, u_k, u_l, dt, prm[P_LAG]), p_act0
+
+
+@njit(cache=True, error_model="numpy")
+def implicit_energies(s, u_k, dt, p_act0, p_fluid, p_fric):
+    """The end of an implicit sub-step of ``dt``: (fluid, damping, friction energy, actuator work) [J].
+
+    The powers where the step evaluates its forces, at its end; the actuator's work by the
+    trapezoidal rule from ``p_act0`` (:func:`move_rest_shape`).
+    """
+    q, v, kbar, lbar, prm, buf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf
+    lrate, geo = buf[B_LRATE, : lbar.size], buf[B_GEO : B_GEO + 2]
+    edge_geometry(q, geo)
+    p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
+    p_damp = damping_power(q, v, prm, geo) if prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0 else 0.0
+    return dt * p_fluid, dt * p_damp, dt * p_fric, 0.5 * dt * (p_act0 + p_act1)
+
+
+@njit(cache=True, error_model="numpy")
 def simulate(s, u_k, u_l, n_steps):
     """Advance one robot by ``n_steps`` steps of ``h`` with inputs held constant; stops at the first failure.
 
@@ -812,31 +848,21 @@ def simulate(s, u_k, u_l, n_steps):
                     buf[B_QPREV, :] = q
                 status, it, res, ef, ed, efr, ea = _sdirk2_substep(s, dt, medium, u_k, u_l, damped)
             else:
-                # the inputs' work over the sub-step by the trapezoidal rule on P_act: exact for
-                # a body that lags the rest shape and for one that follows it at once, where a
-                # one-point rule charges inputs that reverse every step with work never done
-                edge_geometry(q, geo)
-                p_act0 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
-                status = _move_rest_shape(kbar, lbar, lrate, u_k, u_l, dt, tau)
+                status, p_act0 = move_rest_shape(s, u_k, u_l, dt)
                 if status != OK:
                     break
                 # each power where the step evaluates its forces: start (explicit) or end (implicit)
-                p_damp = 0.0
                 it, res = 0, 0.0
                 if symplectic:  # the geometry of q is still geo's
                     p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
-                    if damped:
-                        p_damp = damping_power(q, v, prm, geo)
+                    p_damp = damping_power(q, v, prm, geo) if damped else 0.0
                     p_fluid, p_fric = _symplectic_substep(s, dt, medium)
+                    ef, ed, efr, ea = dt * p_fluid, dt * p_damp, dt * p_fric, 0.5 * dt * (p_act0 + p_act1)
                 else:
                     status, it, res, p_fluid, p_fric = (
                         _bdf2_substep(s, dt, medium) if bdf2 else _be_substep(s, dt, medium, 1.0)
                     )
-                    edge_geometry(q, geo)
-                    p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
-                    if damped:
-                        p_damp = damping_power(q, v, prm, geo)
-                ef, ed, efr, ea = dt * p_fluid, dt * p_damp, dt * p_fric, 0.5 * dt * (p_act0 + p_act1)
+                    ef, ed, efr, ea = implicit_energies(s, u_k, dt, p_act0, p_fluid, p_fric)
             niter = max(niter, it)
             resid = max(resid, res)
             e_fluid += ef
