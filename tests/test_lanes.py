@@ -8,6 +8,8 @@ counts that show the block itself solved the lanes it says it did.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from numba import njit
@@ -108,9 +110,12 @@ def _unflat(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return a.reshape(-1, LANES).T.reshape(shape)
 
 
-def _bits(a: np.ndarray) -> np.ndarray:
-    """The float64 bit patterns (signed zeros told apart)."""
-    return np.ascontiguousarray(a).view(np.int64)
+def _bits(a: np.ndarray, any_nan: bool = False) -> np.ndarray:
+    """The bit patterns (signed zeros told apart); with ``any_nan``, every NaN as one pattern."""
+    a = np.ascontiguousarray(a)
+    if any_nan and a.dtype.kind == "f":
+        a = np.where(np.isnan(a), np.nan, a).astype(a.dtype)
+    return a.view(f"u{a.itemsize}")
 
 
 @pytest.mark.parametrize("jac", [False, True])
@@ -129,8 +134,10 @@ def test_the_block_residual_is_be_residual_bit_for_bit(jac):
     assert np.array_equal(_bits(res_b), _bits(res))  # |R|^2, max |R|/m, drag power
     for flat, want in ((q, ref.q), (F, ref.buf[:, L.B_F]), (R, ref.buf[:, L.B_R]), (A, ref.buf[:, L.B_A])):
         assert np.array_equal(_bits(_unflat(flat, want.shape)), _bits(want))
-    if jac:
-        assert np.array_equal(_bits(_unflat(J, ref.J.shape)), _bits(ref.J))
+    if jac:  # the block's band rows hold the entries a factorization without row exchanges uses
+        band = ref.J[:, :, : lanes.BAND]
+        assert np.array_equal(_bits(_unflat(J, band.shape)), _bits(band))
+        assert not ref.J[:, :, lanes.BAND :].any()
     assert np.unique(ref.prm[:, L.P_DBEND]).size > 2  # the lanes' damping really differs
 
 
@@ -150,14 +157,16 @@ def test_the_block_factor_and_solve_are_band_factor_and_band_solve_bit_for_bit()
     for r in range(LANES):
         assert banded.band_factor(J_ref[r], piv[r], n, banded.PIVOT_THRESHOLD)
         banded.band_solve(J_ref[r], piv[r], n, b_ref[r])
-    J_flat, b_flat, kept = _flat(bands), _flat(b), np.zeros(LANES, dtype=np.bool_)
+    J_flat, b_flat, kept = _flat(bands[:, :, : lanes.BAND]), _flat(b), np.zeros(LANES, dtype=np.bool_)
     lanes.factor(J_flat, kept, n)
     lanes.solve(J_flat, b_flat, n)
     exchanged = (piv != np.arange(n)).any(axis=1)
     assert exchanged.tolist() == [r == 5 for r in range(LANES)]
     assert kept.tolist() == (~exchanged).tolist()
     ok = ~exchanged
-    assert np.array_equal(_bits(_unflat(J_flat, bands.shape)[ok]), _bits(J_ref[ok]))
+    band = J_ref[:, :, : lanes.BAND]
+    assert np.array_equal(_bits(_unflat(J_flat, band.shape)[ok]), _bits(band[ok]))
+    assert not J_ref[ok][:, :, lanes.BAND :].any()  # no fill-in where no row moved
     assert np.array_equal(_bits(_unflat(b_flat, b.shape)[ok]), _bits(b_ref[ok]))
 
 
@@ -245,11 +254,11 @@ def test_robots_that_fail_inside_a_block_step_end_as_robot_step_leaves_them():
     assert (status == L.OK).sum() == LANES - 2
 
 
-def _blocks_against_robot_step(make, actions: np.ndarray, threads: int) -> np.ndarray:
+def _blocks_against_robot_step(make, actions: np.ndarray, threads: int, any_nan: bool = False) -> np.ndarray:
     """Step the robots of ``make()`` through ``actions`` by ``batch_step`` and robot by robot.
 
-    Asserts that every array (but Newton's scratch) and every status end bit for bit the same;
-    returns the statuses.
+    Asserts that every array (but Newton's scratch) and every status end bit for bit the same
+    (with ``any_nan``, a NaN's sign and payload aside); returns the statuses.
     """
     runs = []
     for blocks in (True, False):
@@ -265,7 +274,7 @@ def _blocks_against_robot_step(make, actions: np.ndarray, threads: int) -> np.nd
                 _robot_by_robot(active, tuple(sim), tuple(task), status)
         runs.append((_state(sim, task), status.copy()))
     (a, status_a), (b, status_b) = runs
-    assert all(np.array_equal(_bits(x), _bits(y)) for x, y in zip(a, b, strict=True))
+    assert all(np.array_equal(_bits(x, any_nan), _bits(y, any_nan)) for x, y in zip(a, b, strict=True))
     assert np.array_equal(status_a, status_b)
     return status_a
 
@@ -286,3 +295,158 @@ def _robot_by_robot(active, s, t, status):
         if active[i]:
             si, ti = T._robot(s, t, i)
             status[i] = T.robot_step(si, ti)
+
+
+# --- the ground: each lane a worker (lanes.crawl) ------------------------------------------------
+
+
+def _worms(seed: int, steps: int = 40) -> SoftVectorEnv:
+    """16 worms of different physics after ``steps`` random actions (the last half small), some nodes at rest.
+
+    Lanes 0-3 without stretching damping, the friction and stiffness differ from lane to lane.
+    """
+    venv = SoftVectorEnv("SoftWorm-v0", LANES, num_threads=1, max_episode_steps=None)
+    venv.reset(seed=seed)
+    for i, sim in enumerate(venv.batch.sims):
+        c = sim.config
+        rod = dataclasses.replace(
+            c.rod, damping_stretch=0.0 if i < 4 else 5.0 * (1 + i % 3), E=c.rod.E * (1 + 0.1 * (i % 5))
+        )
+        ground = dataclasses.replace(c.ground, mu_s=1.0 + 0.02 * i, mu_d=0.5 + 0.02 * i)
+        sim.set_config(dataclasses.replace(c, rod=rod, ground=ground))
+    rng = np.random.default_rng(seed)
+    for k in range(steps):  # 9 edges' rates; gentler toward the end, so that some nodes come to rest
+        venv.advance(
+            rng.uniform(-1, 1, (LANES, 9)) * (1.0 if k < steps // 2 else 0.1), np.ones(LANES, dtype=bool)
+        )
+    return venv
+
+
+@njit
+def _ground_starts(s, t):
+    """Every worm's action to rates, its rest shape moved and its implicit step set up (as simulate does)."""
+    s, t = SimArrays(*s), T.TaskArrays(*t)
+    for i in range(s.q.shape[0]):
+        si, ti = T._robot(s, t, i)
+        T.step_begin(si, ti)
+        si.buf[L.B_LRATE, : si.lbar.size] = (
+            ti.ul if si.prm[L.P_LAG] == 0.0 else si.buf[L.B_LRATE, : si.lbar.size]
+        )
+        stepper.move_rest_shape(si, ti.uk, ti.ul, si.prm[L.P_H])
+        stepper._be_start(si, L.MEDIUM_GROUND, 1.0)
+
+
+@njit
+def _ground_block(s, dt):
+    """The worms' steps set up, taken into the lanes of a new block and their residuals made there."""
+    s = SimArrays(*s)
+    x = lanes.allocate(s.q.shape[1])
+    p = np.empty((lanes.N_LANE_PRM, LANES))
+    wi = np.zeros((lanes.N_WORK_INT, LANES), dtype=np.int64)
+    for r in range(LANES):
+        si = L.sim_views(s.f[r], s.ibuf[r])
+        lanes._start_solve(si, x, p, r)
+        lanes._await(si, x, wi, r, 0, True)
+    lanes.ground_residual(x, p, dt, x.res)
+    return x
+
+
+@njit
+def _ground_residuals(s, dt, res):
+    s = SimArrays(*s)
+    for i in range(s.q.shape[0]):
+        r = stepper._be_residual(L.sim_views(s.f[i], s.ibuf[i]), dt, L.MEDIUM_GROUND, True)
+        res[0, i], res[1, i], res[2, i] = r[0], r[1], r[3]
+
+
+def test_the_ground_residual_is_be_residual_on_the_ground_bit_for_bit():
+    """Friction on the sliding nodes, held rows on the stuck ones, with its Jacobian."""
+    venv = _worms(seed=1)
+    sim, task = venv.batch.sim, venv.batch.task
+    _ground_starts(tuple(sim), tuple(task))
+    held = sim.ibuf[:, L.I_FRICTION, : sim.q.shape[1] // 2] == L.STUCK
+    assert held.any(axis=1).sum() >= 4 and not held.all()  # lanes with nodes held, and sliding ones
+    dt = 0.01
+    x = _ground_block(tuple(sim), dt)
+    res = np.empty((3, LANES))
+    _ground_residuals(tuple(sim), dt, res)
+    assert np.array_equal(_bits(x.res), _bits(res))  # |R|^2, max |R|/m, friction power
+    ref = L.sim_arrays_over(sim.f, sim.ibuf)
+    for flat, want in (
+        (x.q, ref.q),
+        (x.F, ref.buf[:, L.B_F]),
+        (x.R, ref.buf[:, L.B_R]),
+        (x.A, ref.buf[:, L.B_A]),
+    ):
+        assert np.array_equal(_bits(_unflat(flat, want.shape)), _bits(want))
+    band = ref.J[:, :, : lanes.BAND]
+    assert np.array_equal(_bits(_unflat(x.J, band.shape)), _bits(band))
+    assert not ref.J[:, :, lanes.BAND :].any()
+
+
+def test_a_worm_lane_whose_factors_would_exchange_rows_takes_band_factors_step():
+    """Where the block's factorization would exchange rows, the lane's step is ``band_factor``'s own."""
+    venv = _worms(seed=2)
+    sim = venv.batch.sim
+    _ground_starts(tuple(sim), tuple(venv.batch.task))
+    x = _ground_block(tuple(sim), 0.01)
+    r = 5
+    x.J[lanes._jx(0, banded.KL, r)] *= 1e-3  # its first pivot far below the entries under it
+    lanes.factor(x.J, x.kept, 20)
+    assert x.kept.tolist() == [i != r for i in range(LANES)]
+    ref = L.sim_arrays_over(sim.f[r].copy(), sim.ibuf[r].copy())  # _be_newton's step on a copy
+    stepper._be_residual(ref, 0.01, L.MEDIUM_GROUND, True)
+    piv, dv = np.zeros(20, dtype=np.int64), -ref.buf[L.B_R]
+    assert banded.band_factor(ref.J, piv, 20, banded.PIVOT_THRESHOLD)
+    banded.band_solve(ref.J, piv, 20, dv)
+    si = venv.batch.sims[r].arrays
+    njac = si.out[L.O_NJAC]
+    assert _newton_step(si, x, r)
+    assert si.out[L.O_NJAC] == njac  # the band made again is not counted: the lane's residual was
+    assert np.array_equal(_bits(si.buf[L.B_DV]), _bits(dv)) and np.array_equal(si.buf[L.B_VACC], si.v)
+
+
+@njit
+def _newton_step(si, x, r):
+    return lanes._newton_step(si, x, 0.01, r)
+
+
+def test_worms_that_fail_inside_the_lanes_end_as_robot_step_leaves_them():
+    """Worms over two sub-steps, 67 of them in 16 lanes, some failing.
+
+    Robot 7 starts with a NaN velocity, robot 9 may take one Newton iteration, robot 11 has
+    another step length (it goes robot by robot). Every robot's state and status against
+    ``robot_step``, but for the sign and payload of robot 7's NaN diagnostics: the vector code
+    may take a product's operands in the other order, and with two NaNs the first one's bits win.
+    """
+    n = T.CRAWL_MIN + 3
+
+    def worms():
+        venv = SoftVectorEnv("SoftWorm-v0", n, num_threads=1, max_episode_steps=None)
+        venv.reset(seed=6)
+        sim = venv.batch.sim
+        sim.prm[:, L.P_SUBSTEPS] = 2
+        sim.prm[9, L.P_MAXIT] = 1
+        sim.prm[11, L.P_H] = 0.005
+        sim.v[7, 4] = np.nan
+        return venv
+
+    status = _blocks_against_robot_step(
+        worms, np.random.default_rng(8).uniform(-1, 1, (6, n, 9)), threads=1, any_nan=True
+    )
+    assert status[7] == L.NON_FINITE and status[9] == L.NOT_CONVERGED
+    assert (status == L.OK).sum() == n - 2
+
+
+def test_worms_in_lanes_on_two_threads_are_worms_robot_by_robot():
+    """163 worms on two threads, each thread's share (96 and 67) in its lanes."""
+    n = 10 * LANES + 3
+    actions = np.random.default_rng(9).uniform(-1, 1, (20, n, 9))
+
+    def worms():
+        venv = SoftVectorEnv("SoftWorm-v0", n, num_threads=2, max_episode_steps=None)
+        venv.reset(seed=4)
+        return venv
+
+    status = _blocks_against_robot_step(worms, actions, threads=2)
+    assert (status == L.OK).all()

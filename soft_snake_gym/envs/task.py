@@ -599,15 +599,86 @@ def _step_units(active, s, t, status, first, end):
     active, status = L.borrowed((active, status))
     owned = _block_scratch(s.q.shape[1])
     scratch = L.borrowed(owned)
+    lo, hi = _first_robot(first, status.size), _first_robot(end, status.size)
+    if _crawls(active, s, lo, hi):
+        _crawl(active, s, t, status, lo, hi, scratch)
+        return owned
     for u in range(first, end):
         _step_unit(active, s, t, status, u, scratch)
     return owned  # used after the loop, so that numba frees it only then: its borrowed views are not counted
+
+
+CRAWL_MIN = 4 * lanes.LANES
+"""The fewest active crawlers on a thread that :func:`_crawl` takes: its lanes pay from about 64
+(docs/performance.md, "Worms in lanes"); with fewer, the lanes idle while the last robots finish."""
+
+
+@njit(cache=True, error_model="numpy")
+def _crawls(active, s, lo, hi):
+    """True if robots ``lo`` .. ``hi - 1`` go to :func:`_crawl`: at least ``CRAWL_MIN`` active ones, ``lanes.crawl_eligible``."""
+    count = 0
+    for i in range(lo, hi):
+        if active[i]:
+            if not lanes.crawl_eligible(s.prm[i]):
+                return False
+            count += 1
+    return count >= CRAWL_MIN
+
+
+@njit(cache=True, error_model="numpy")
+def _crawl(active, s, t, status, lo, hi, scratch):
+    """:func:`robot_step` for the active robots ``lo`` .. ``hi - 1``, the crawlers' physics sixteen at a time.
+
+    Each robot's task start (:func:`step_begin`), then the physics of all (``lanes.crawl``: each
+    robot's ``stepper.simulate`` bit for bit), then each task end (:func:`step_end`): the robots
+    are independent, so each ends as :func:`robot_step` leaves it. Robots that ``lanes.crawl``
+    does not take, or with another ``h`` or sub-step count than the first, step one by one.
+    """
+    x, p = scratch[0], scratch[1]
+    m = hi - lo
+    robots, nsteps, code = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m, np.int64)
+    sq, before = np.empty(m), np.empty((3, m))
+    count = 0
+    for i in range(lo, hi):
+        if not active[i]:
+            continue
+        si, ti = _robot(s, t, i)
+        if not (
+            lanes.crawl_eligible(si.prm)
+            and (count == 0 or si.prm[L.P_H] == s.prm[robots[0], L.P_H])
+            and (count == 0 or si.prm[L.P_SUBSTEPS] == s.prm[robots[0], L.P_SUBSTEPS])
+        ):
+            status[i] = robot_step(si, ti)
+            continue
+        sq[count] = step_begin(si, ti)
+        if sq[count] != sq[count]:
+            status[i] = BAD_ACTION
+            continue
+        before[0, count], before[1, count], before[2, count] = energies_before(si)
+        robots[count], nsteps[count] = i, int(ti.tp[T_NSUB])
+        count += 1
+    if count == 0:
+        return
+    wi, wf = np.empty((lanes.N_WORK_INT, lanes.LANES), np.int64), np.empty((lanes.N_WORK, lanes.LANES))
+    lanes.crawl(s, t.uk, t.ul, robots[:count], nsteps[:count], code, x, p, wi, wf)
+    for k in range(count):
+        i = robots[k]
+        si, ti = _robot(s, t, i)
+        step_end(si, ti, code[k], sq[k], (before[0, k], before[1, k], before[2, k]), False)
+        status[i] = code[k]
 
 
 @njit(cache=True, inline="always")
 def _units(n):
     """The units of work of ``n`` robots: the blocks of ``lanes.LANES``, then each robot left over."""
     return n // lanes.LANES + n % lanes.LANES
+
+
+@njit(cache=True, inline="always")
+def _first_robot(u, n):
+    """The first robot of unit ``u`` of :func:`_units` (``n`` for ``u`` past the last)."""
+    blocks = n // lanes.LANES
+    return u * lanes.LANES if u <= blocks else blocks * lanes.LANES + u - blocks
 
 
 @njit(cache=True, error_model="numpy")

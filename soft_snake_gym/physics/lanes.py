@@ -1,4 +1,4 @@
-"""Sixteen robots per instruction: SDIRK2's backward-Euler stages in water, solved for a block at once.
+"""Sixteen robots per instruction: SDIRK2's stages in water for a block at once; worms' steps, a lane each.
 
 The batched env (``envs.task.batch_step``) steps its swimmers in blocks of :data:`LANES`. In a
 block every robot runs the same arithmetic on its own numbers, so each SDIRK2 stage is done for
@@ -11,7 +11,7 @@ loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/
 "Sixteen eels per instruction"):
 
 - every array of the block is flat, element ``i`` of lane ``r`` at ``i * LANES + r`` (a band
-  entry (row, col) at ``(row * WIDTH + col) * LANES + r``), strides that are compile-time
+  entry (row, col) at ``(row * BAND + col) * LANES + r``), strides that are compile-time
   constants, so that LLVM can tell the stores of one lane's straight-line code apart;
 - a lane loop runs ``LANES`` = 16 iterations, the least that LLVM's loop vectorizer takes on
   (on AVX-512 two registers of eight doubles);
@@ -29,6 +29,11 @@ third iteration, no convergence) is put back into its robot as the stage started
 there by ``_be_newton`` itself, and taken back. A block's robots therefore end every stage
 exactly as the single env's, which the tests compare bit for bit. Transcendental functions stay
 out of the lane loops: numba may vectorize them with SVML, whose digits are not libm's.
+
+**On the ground** the Newton paths differ from robot to robot, so a block's lanes are workers
+instead (:func:`crawl`): each runs one worm's step with the scalar stepper's own functions up to
+each residual, which :func:`ground_residual` makes for the sixteen lanes at once; a lane whose
+worm is done takes the next.
 """
 
 from __future__ import annotations
@@ -40,12 +45,13 @@ import numpy as np
 from numba import njit
 
 from soft_snake_gym.physics import banded, forces, geometry, layout, stepper
-from soft_snake_gym.physics.banded import KL, KU, PIVOT_THRESHOLD, WIDTH
+from soft_snake_gym.physics.banded import KL, KU, PIVOT_THRESHOLD
 from soft_snake_gym.physics.cache import drop_stale_cache
 from soft_snake_gym.physics.geometry import _turning_of
 from soft_snake_gym.physics.layout import (
     ADDED_MASS_CONSISTENT,
     B_A,
+    B_DV,
     B_F,
     B_FEXT,
     B_GEO,
@@ -55,14 +61,21 @@ from soft_snake_gym.physics.layout import (
     B_Q0,
     B_R,
     B_V0,
+    B_VACC,
     B_VSTEP,
+    I_FRICTION,
+    I_PIV,
+    MEDIUM_GROUND,
     MEDIUM_WATER,
+    METHOD_BACKWARD_EULER,
+    NOT_CONVERGED,
     O_NFACTOR,
     O_NJAC,
     O_NRES,
     OK,
     P_A,
     P_ADDED_MASS,
+    P_ANISO,
     P_B,
     P_CD,
     P_CF,
@@ -71,10 +84,18 @@ from soft_snake_gym.physics.layout import (
     P_DSTRETCH,
     P_EA,
     P_EI,
+    P_G,
+    P_H,
+    P_LAG,
     P_MAXIT,
     P_MEDIUM,
+    P_METHOD,
+    P_MUD,
     P_RHO,
+    P_SUBSTEPS,
     P_TOL,
+    P_VTOL,
+    STUCK,
 )
 
 # the cached kernels embed _be_newton and the kernels it calls from these files
@@ -82,12 +103,17 @@ drop_stale_cache(__file__, [m.__file__ for m in (banded, forces, geometry, layou
 
 LANES = 16
 """Robots per block: a compile-time constant, and LLVM's least trip count for a vector loop."""
+BAND = KL + KU + 1
+"""Entries of a band row in a block: ``banded.WIDTH`` less the room for row exchanges' fill-in, which
+the block's factorization never makes (a lane that would exchange rows is solved elsewhere)."""
 
 # per-lane parameters, rows of the block's (N_LANE_PRM, LANES) array
-L_EA, L_EI, L_D, L_DB, L_CT, L_CN, L_CM, L_TOL, L_MAXIT, L_CHORD = range(10)
-N_LANE_PRM = 10
+L_EA, L_EI, L_D, L_DB, L_CT, L_CN, L_CM, L_TOL, L_MAXIT, L_CHORD, L_MUD, L_G, L_EPS2 = range(13)
+N_LANE_PRM = 13
 # per-lane results of a residual, rows of (N_LANE_RES, LANES): |R|^2, max |R|/m, drag power
+# (on the ground: friction power)
 L_NORM2, L_RMAX, L_PFLUID = range(3)
+L_PFRIC = L_PFLUID
 N_LANE_RES = 3
 
 
@@ -104,7 +130,8 @@ class Block(NamedTuple):
     ``res1``, the lanes whose factors kept their rows ``kept``, the lanes on the common path
     ``on`` and how each ended ``done``; the stage's actuator and damping power per lane
     ``power`` (2, LANES), the curvatures and their rates at the stage's end ``curv`` (2 (N-2)
-    rows), and the energies at the step's end ``energy`` (3, LANES).
+    rows), and the energies at the step's end ``energy`` (3, LANES). On the ground
+    (:func:`crawl`) ``stuck`` is 1 for a node held at rest, else 0 (``ibuf[I_FRICTION]``).
     """
 
     q: np.ndarray
@@ -135,6 +162,7 @@ class Block(NamedTuple):
     power: np.ndarray
     curv: np.ndarray
     energy: np.ndarray
+    stuck: np.ndarray
 
 
 @njit(cache=True, inline="always")
@@ -146,7 +174,7 @@ def _ix(i, r):
 @njit(cache=True, inline="always")
 def _jx(row, col, r):
     """Flat index of band entry (``row``, ``col``) of lane ``r``."""
-    return np.uint64((row * WIDTH + col) * LANES + r)
+    return np.uint64((row * BAND + col) * LANES + r)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -236,42 +264,24 @@ def _turning_rate(v, j, r, g0x, g0y, g1x, g1y, g2x, g2y):
     )
 
 
-@njit(cache=True, error_model="numpy")
-def residual(x, p, dt, jac, res):
-    """``stepper._be_residual`` in water with the consistent added mass, for every lane of a block.
-
-    ``x`` is the block's :func:`allocate` arrays, ``p`` its lane parameters (``L_*`` rows). Writes
-    ``q = q0 + dt v``, the forces ``F``, the residual ``R``, ``v - v0`` into ``A`` and, if
-    ``jac``, the Jacobian into ``J``; per lane into ``res`` (``L_NORM2``, ``L_RMAX``,
-    ``L_PFLUID``). ``jac`` is a constant in each compiled body (see the module docstring).
-
-    The damping terms are computed for every lane, where ``assemble`` skips them for a zero
-    coefficient: a branch in a lane loop keeps it scalar. A zero coefficient adds signed zeros
-    there, which change no force and no entry of the band (its entries start at +0 and only
-    add, so none is -0). A lane whose velocity is not finite could differ; its residual is not
-    finite either, and ``newton`` solves it by ``_be_newton``.
-    """
-    if jac:
-        _residual(x, p, dt, True, res)
-    else:
-        _residual(x, p, dt, False, res)
-
-
 @njit(cache=True, inline="always", error_model="numpy")
-def _residual(x, p, dt, jac, res):
-    """The body of :func:`residual`: ``_be_residual``'s operations in its order, lane by lane."""
-    q, v, q0, v0, fext, m, p0 = x.q, x.v, x.q0, x.v0, x.fext, x.m, x.p0
-    kbar, lbar, F, R, A, J, E = x.kbar, x.lbar, x.F, x.R, x.A, x.J, x.E
+def _start_residual(x, dt):
+    """``_be_residual``'s start for every lane: ``q = q0 + dt v``, ``F = fext``, ``A = v - v0``, the edges of ``q`` in ``E``."""
+    q, v, q0, v0, fext, F, A, E = x.q, x.v, x.q0, x.v0, x.fext, x.F, x.A, x.E
     n2 = q.size // LANES
-    cx, cv = -dt * dt, -dt
     for i in range(n2):
         for r in range(LANES):
             q[_ix(i, r)] = q0[_ix(i, r)] + dt * v[_ix(i, r)]
             F[_ix(i, r)] = fext[_ix(i, r)]
             A[_ix(i, r)] = v[_ix(i, r)] - v0[_ix(i, r)]
     _edge_geometry(q, E, n2)  # as assemble: each edge's square root and divisions once per state
-    if jac:
-        J[:] = 0.0
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _elastic(x, p, cx, cv, jac):
+    """``forces.assemble``'s stretching and bending, with their damping, for every lane (``E`` of ``q`` made)."""
+    v, kbar, lbar, F, J, E = x.v, x.kbar, x.lbar, x.F, x.J, x.E
+    n2 = v.size // LANES
     for k in range(n2 // 2 - 1):  # stretching
         for r in range(LANES):
             l, tx, ty = E[_ix(4 * k, r)], E[_ix(4 * k + 2, r)], E[_ix(4 * k + 3, r)]
@@ -335,6 +345,39 @@ def _residual(x, p, dt, jac, res):
                 for k in range(9):
                     m00, m01, m10, m11 = blocks[k]
                     _add_block(J, r, j - 1 + k // 3, j - 1 + k % 3, m00, m01, m10, m11)
+
+
+@njit(cache=True, error_model="numpy")
+def residual(x, p, dt, jac, res):
+    """``stepper._be_residual`` in water with the consistent added mass, for every lane of a block.
+
+    ``x`` is the block's :func:`allocate` arrays, ``p`` its lane parameters (``L_*`` rows). Writes
+    ``q = q0 + dt v``, the forces ``F``, the residual ``R``, ``v - v0`` into ``A`` and, if
+    ``jac``, the Jacobian into ``J``; per lane into ``res`` (``L_NORM2``, ``L_RMAX``,
+    ``L_PFLUID``). ``jac`` is a constant in each compiled body (see the module docstring).
+
+    The damping terms are computed for every lane, where ``assemble`` skips them for a zero
+    coefficient: a branch in a lane loop keeps it scalar. A zero coefficient adds signed zeros
+    there, which change no force and no entry of the band (its entries start at +0 and only
+    add, so none is -0). A lane whose velocity is not finite could differ; its residual is not
+    finite either, and ``newton`` solves it by ``_be_newton``.
+    """
+    if jac:
+        _residual(x, p, dt, True, res)
+    else:
+        _residual(x, p, dt, False, res)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _residual(x, p, dt, jac, res):
+    """The body of :func:`residual`: ``_be_residual``'s operations in its order, lane by lane."""
+    q, v, m, p0, F, R, A, J, E = x.q, x.v, x.m, x.p0, x.F, x.R, x.A, x.J, x.E
+    n2 = q.size // LANES
+    cx, cv = -dt * dt, -dt
+    _start_residual(x, dt)
+    if jac:
+        J[:] = 0.0
+    _elastic(x, p, cx, cv, jac)
     for r in range(LANES):
         res[L_PFLUID, r] = 0.0
     for i in range(n2 // 2 - 1):  # drag
@@ -464,10 +507,10 @@ def allocate(n2):
     n, N = n2 * LANES, n2 // 2
     z = np.zeros
     return Block(z(n), z(n), z(n), z(n), z(n), z(n), z(n), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n),
-                 z(n), z(n2 * WIDTH * LANES), z(n), z(n), z(4 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
+                 z(n), z(n2 * BAND * LANES), z(n), z(n), z(4 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
                  z((N_LANE_RES, LANES)), z(LANES, dtype=np.bool_), z(LANES, dtype=np.bool_),
                  z(LANES, dtype=np.int64), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z((2, LANES)), z(2 * (N - 2) * LANES),
-                 z((3, LANES)))  # fmt: skip
+                 z((3, LANES)), z(N * LANES))  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
@@ -793,3 +836,370 @@ def newton(s, first, go, x, p, dt, result):
         result[0, r], result[1, r], result[2, r], result[3, r], result[4, r] = status, it, rmax, pf, pfr
         solved += on[r]
     return solved
+
+
+# --- the ground: backward-Euler steps of worms, each lane a worker ------------------------------
+
+
+@njit(cache=True, error_model="numpy")
+def ground_residual(x, p, dt, res):
+    """``stepper._be_residual`` on the ground with its Jacobian, for every lane of a block.
+
+    As :func:`residual` (the elastic forces in ``assemble``'s order), then isotropic kinetic
+    friction on the sliding nodes and ``v_i = 0`` on the stuck ones (``x.stuck``). Writes ``q``,
+    ``F``, ``R``, ``A`` = ``v - v0`` and the band ``J``; per lane into ``res`` (``L_NORM2``,
+    ``L_RMAX``, ``L_PFRIC``). The Jacobian is always made: the residual's bits do not depend on
+    it, and :func:`crawl` then has the Jacobian of every iterate it accepts.
+    """
+    v, m, F, R, A, J, stuck = x.v, x.m, x.F, x.R, x.A, x.J, x.stuck
+    n2 = v.size // LANES
+    cx, cv = -dt * dt, -dt
+    _start_residual(x, dt)
+    J[:] = 0.0
+    _elastic(x, p, cx, cv, True)
+    for i in range(n2):
+        for r in range(LANES):
+            R[_ix(i, r)] = m[_ix(i, r)] * A[_ix(i, r)] - dt * F[_ix(i, r)]
+            J[_jx(i, KL, r)] += m[_ix(i, r)]
+    for r in range(LANES):
+        res[L_PFRIC, r] = 0.0
+    for i in range(n2 // 2):
+        r0, r1 = 2 * i, 2 * i + 1
+        for r in range(LANES):
+            held = stuck[_ix(i, r)] != 0.0
+            vx, vy = v[_ix(r0, r)], v[_ix(r1, r)]
+            fn = m[_ix(r0, r)] * p[L_G, r]
+            fx, fy, d00, d01, d10, d11 = forces.isotropic_friction(vx, vy, p[L_MUD, r] * fn, p[L_EPS2, r])
+            R[_ix(r0, r)] = vx if held else R[_ix(r0, r)] - dt * fx
+            R[_ix(r1, r)] = vy if held else R[_ix(r1, r)] - dt * fy
+            res[L_PFRIC, r] -= 0.0 if held else fx * vx + fy * vy
+            for c in range(BAND):  # a held node's rows: their assembled diagonal alone
+                if c != KL:
+                    J[_jx(r0, c, r)] = 0.0 if held else J[_jx(r0, c, r)]
+                    J[_jx(r1, c, r)] = 0.0 if held else J[_jx(r1, c, r)]
+            J[_jx(r0, KL, r)] = J[_jx(r0, KL, r)] if held else J[_jx(r0, KL, r)] + -dt * d00
+            J[_jx(r0, KL + 1, r)] = 0.0 if held else J[_jx(r0, KL + 1, r)] + -dt * d01
+            J[_jx(r1, KL - 1, r)] = 0.0 if held else J[_jx(r1, KL - 1, r)] + -dt * d10
+            J[_jx(r1, KL, r)] = J[_jx(r1, KL, r)] if held else J[_jx(r1, KL, r)] + -dt * d11
+    for r in range(LANES):
+        res[L_NORM2, r] = 0.0
+        res[L_RMAX, r] = 0.0
+    for i in range(n2):
+        for r in range(LANES):
+            e = R[_ix(i, r)]
+            res[L_NORM2, r] += e * e
+            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) * (1.0 / m[_ix(i, r)]))  # as _be_residual's B_MINV
+
+
+# a worker lane's state, rows of (N_WORK_INT, LANES) int64 and (N_WORK, LANES) float64 arrays:
+# the robot in the lane (-1: none) and its place in the list, the job's phase, steps done and
+# to do, sub-steps done, _be_newton's counters, line-search trials, the status; Newton's
+# |R|^2, max |R|/m and friction power at the iterate, the line search's step, the actuator
+# power at the sub-step's start, simulate's sums over the sub-steps
+W_ROBOT, W_SLOT, W_PHASE, W_STEP, W_NSTEPS, W_SUB, W_IT, W_PASS, W_SEARCHED, W_TRIALS, W_RENEW = range(11)
+W_STATUS, W_NITER = 11, 12
+N_WORK_INT = 13
+W_NORM2, W_RMAX, W_PFRIC, W_LS, W_PACT0, W_RESID, W_EDAMP, W_EFRIC, W_EACT = range(9)
+N_WORK = 9
+# the phases of a job: a step begins, a sub-step begins, Newton's loop (its top), a residual
+# awaited at a Newton iterate or at a line-search trial, a Newton step awaited (the
+# factorization and solve), a sub-step ends, a step ends
+_STEP, _SUB, _TOP, _POINT, _TRIAL, _SOLVE, _SUB_END, _STEP_END = range(8)
+# what a lane's job awaits when it stops (_work's result): nothing (it ended), a residual, a solve
+_ENDED, _RESIDUAL, _NEWTON_STEP = range(3)
+
+
+@njit(cache=True, error_model="numpy")
+def crawl_eligible(prm):
+    """True if :func:`crawl` takes the robot: on the ground, backward Euler, isotropic friction."""
+    return (
+        int(prm[P_MEDIUM]) == MEDIUM_GROUND
+        and int(prm[P_METHOD]) == METHOD_BACKWARD_EULER
+        and prm[P_ANISO] == 0.0
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
+    """``stepper.simulate(robot, uk[i], ul[i], nsteps[k])`` for each robot ``i = robots[k]``, bit for bit.
+
+    Robots of stacked ``SimArrays`` ``s``, every one :func:`crawl_eligible` with the same ``h``
+    and sub-steps; the status of ``robots[k]`` into ``status[k]``. Each lane of block ``x`` is
+    a worker: it runs one robot's job (``simulate``'s steps and sub-steps, each a ``_be_start``
+    and ``_be_newton``'s loop on the ground) in the robot's own arrays, with ``stepper``'s own
+    functions, up to the point where ``_be_newton`` evaluates a residual; then it waits. Each
+    round evaluates the sixteen lanes' residuals with their Jacobians at once
+    (:func:`ground_residual`), and each lane goes on to its next residual, or ends its job and
+    takes the next robot, so that lanes stay busy however many iterations each robot's step
+    takes. ``wi``, ``wf``: the workers' state (``W_*`` rows).
+
+    Every residual comes with its Jacobian, so where ``_be_newton`` assembles the Jacobian again
+    at the iterate a line search accepted, the trial's serves (the same bits): it is counted in
+    ``out[O_NJAC]`` as ``_be_newton`` counts it, and not computed. The lanes at a Newton step
+    factor and solve at once (:func:`factor`, :func:`solve`); a lane whose factors would
+    exchange rows takes ``band_factor``'s own step (:func:`_newton_step`). Bit for bit, but for
+    the sign and payload of a NaN, which in vector code depend on the order in which an
+    instruction takes its operands: a robot whose state is not finite fails as alone, its
+    diagnostics NaN as alone.
+    """
+    robots, nsteps, status, wi, wf = layout.borrowed((robots, nsteps, status, wi, wf))
+    first = robots[0]
+    dt = s.prm[first, P_H] / int(s.prm[first, P_SUBSTEPS])  # as stepper.simulate
+    n2 = s.q.shape[1]
+    taken = 0
+    for r in range(LANES):
+        taken = _take_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
+    while True:
+        busy = False
+        for r in range(LANES):
+            busy |= wi[W_ROBOT, r] >= 0
+        if not busy:
+            return
+        ground_residual(x, p, dt, x.res)
+        solving = False
+        for r in range(LANES):
+            i = wi[W_ROBOT, r]
+            if i < 0:
+                continue
+            si = layout.sim_views(s.f[i], s.ibuf[i])
+            awaits = _work(si, uk[i], ul[i], x, p, wi, wf, dt, r)
+            if awaits == _ENDED:
+                status[wi[W_SLOT, r]] = wi[W_STATUS, r]
+                taken = _take_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
+            solving |= awaits == _NEWTON_STEP
+        if not solving:
+            continue
+        # the lanes at a Newton step: band_factor and band_solve on -R, at once
+        factor(x.J, x.kept, n2)
+        for k in range(n2 * LANES):
+            x.dv[k] = -x.R[k]
+        solve(x.J, x.dv, n2)
+        for r in range(LANES):
+            i = wi[W_ROBOT, r]
+            if i < 0 or wi[W_PHASE, r] != _SOLVE:
+                continue
+            si = layout.sim_views(s.f[i], s.ibuf[i])
+            if not _newton_step(si, x, dt, r):
+                wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
+            if _work(si, uk[i], ul[i], x, p, wi, wf, dt, r) == _ENDED:
+                status[wi[W_SLOT, r]] = wi[W_STATUS, r]
+                taken = _take_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _newton_step(si, x, dt, r):
+    """``_be_newton``'s factorization and solve for lane ``r``: ``vacc = v`` and ``dv`` in the robot's ``buf``.
+
+    From the lane's factors where they kept every row, else by ``band_factor`` on the robot's
+    band, assembled again at the same iterate (the same bits; not counted). False where
+    ``band_factor`` fails.
+    """
+    v, buf, ibuf = si.v, si.buf, si.ibuf
+    n = v.size
+    vacc, dv = buf[B_VACC], buf[B_DV]
+    if x.kept[r]:
+        for k in range(n):
+            vacc[k] = v[k]
+            dv[k] = x.dv[_ix(k, r)]
+        return True
+    stepper._be_residual(si, dt, MEDIUM_GROUND, True)
+    si.out[O_NJAC] -= 1.0
+    piv = ibuf[I_PIV]
+    if not banded.band_factor(si.J, piv, n, PIVOT_THRESHOLD):
+        return False
+    R = buf[B_R]
+    for k in range(n):
+        vacc[k] = v[k]
+        dv[k] = -R[k]
+    banded.band_solve(si.J, piv, n, dv)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _take_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r):
+    """Give lane ``r`` the next robot of ``robots`` after the first ``taken``; returns how many are taken now.
+
+    Robots whose job ends before its first residual (a rest length that fails) end here; the
+    lane is left empty (``W_ROBOT`` -1) when none is left.
+    """
+    while taken < robots.size:
+        k = taken
+        taken += 1
+        i = robots[k]
+        si = layout.sim_views(s.f[i], s.ibuf[i])
+        wi[W_ROBOT, r], wi[W_SLOT, r], wi[W_PHASE, r] = i, k, _STEP
+        wi[W_STEP, r], wi[W_NSTEPS, r], wi[W_STATUS, r] = 0, nsteps[k], OK
+        if si.prm[P_LAG] == 0.0:  # as stepper.simulate: no lag, the rates jump to the inputs
+            si.buf[B_LRATE, : si.lbar.size] = ul[i]
+        if _work(si, uk[i], ul[i], x, p, wi, wf, dt, r) != _ENDED:
+            return taken
+        status[k] = wi[W_STATUS, r]
+    wi[W_ROBOT, r] = -1
+    return taken
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _await(si, x, wi, r, phase, jac):
+    """Lane ``r`` waits for the residual at its robot's iterate (``jac``: counted as one with its Jacobian)."""
+    si.out[O_NJAC if jac else O_NRES] += 1.0
+    wi[W_PHASE, r] = phase
+    state = si.ibuf[I_FRICTION]
+    for k in range(si.v.size):
+        x.v[_ix(k, r)] = si.v[k]
+    for k in range(state.size // 2):
+        x.stuck[_ix(k, r)] = 1.0 if state[k] == STUCK else 0.0
+    return _RESIDUAL
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _store(si, x, r, whole):
+    """What ``_be_residual`` wrote at lane ``r``'s last iterate, into its robot: ``F``; if ``whole``, ``q``, ``R`` and ``A`` too.
+
+    The lane's residual serves the lane's Newton; the robot needs its forces where
+    ``_update_contacts`` reads them, and the rest where its sub-step ends.
+    """
+    buf = si.buf
+    for k in range(si.q.size):
+        buf[B_F, k] = x.F[_ix(k, r)]
+    if whole:
+        for k in range(si.q.size):
+            si.q[k] = x.q[_ix(k, r)]
+            buf[B_R, k] = x.R[_ix(k, r)]
+            buf[B_A, k] = x.A[_ix(k, r)]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _start_solve(si, x, p, r):
+    """Copy a robot's implicit step, set up by ``_be_start``, into lane ``r``: its start, masses, rest shape and parameters."""
+    buf, prm = si.buf, si.prm
+    for k in range(si.q.size):
+        x.q0[_ix(k, r)] = buf[B_Q0, k]
+        x.v0[_ix(k, r)] = buf[B_V0, k]
+        x.fext[_ix(k, r)] = buf[B_FEXT, k]
+        x.m[_ix(k, r)] = buf[B_M, k]
+    for k in range(si.kbar.size):
+        x.kbar[_ix(k, r)] = si.kbar[k]
+    for k in range(si.lbar.size):
+        x.lbar[_ix(k, r)] = si.lbar[k]
+    p[L_EA, r], p[L_EI, r], p[L_D, r], p[L_DB, r] = prm[P_EA], prm[P_EI], prm[P_DSTRETCH], prm[P_DBEND]
+    p[L_MUD, r], p[L_G, r] = prm[P_MUD], prm[P_G]
+    p[L_EPS2, r] = (0.1 * prm[P_VTOL]) ** 2  # as _be_residual
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _work(si, u_k, u_l, x, p, wi, wf, dt, r):
+    """Run lane ``r``'s job on until it awaits something; returns what (``_RESIDUAL``, ``_NEWTON_STEP``, ``_ENDED``).
+
+    The phases are ``stepper.simulate``'s loops and ``_be_newton``'s on the ground (never a chord
+    step there), in their order. A lane that awaited a residual (``_POINT``, ``_TRIAL``) finds it
+    in ``x.res`` and the robot's ``q``, ``F``, ``R``, ``A``, its Jacobian in its lane of ``x.J``;
+    one that awaited a Newton step (``_SOLVE``) finds ``vacc`` and ``dv`` in the robot's ``buf``.
+    An ended job's status is in ``W_STATUS``.
+    """
+    q, v, prm, buf, ibuf, out = si.q, si.v, si.prm, si.buf, si.ibuf, si.out
+    n = q.size
+    tol, maxit = prm[P_TOL], int(prm[P_MAXIT])
+    vacc, dv = buf[B_VACC], buf[B_DV]
+    phase = wi[W_PHASE, r]
+    if phase == _POINT:
+        wf[W_NORM2, r], wf[W_RMAX, r], wf[W_PFRIC, r] = x.res[L_NORM2, r], x.res[L_RMAX, r], x.res[L_PFRIC, r]
+        wi[W_PHASE, r] = _TOP
+    elif phase == _TRIAL:
+        norm2, rmax = x.res[L_NORM2, r], x.res[L_RMAX, r]
+        step = wf[W_LS, r]
+        if not norm2 < wf[W_NORM2, r] * (1.0 - 1e-4 * step):  # _be_newton's backtracking
+            step *= 0.5
+            wf[W_LS, r] = step
+            wi[W_TRIALS, r] += 1
+            if wi[W_TRIALS, r] < 12:
+                for k in range(n):
+                    v[k] = vacc[k] + step * dv[k]
+                return _await(si, x, wi, r, _TRIAL, False)
+        if step < 1.0:
+            wi[W_SEARCHED, r] = wi[W_PASS, r]
+        wf[W_NORM2, r], wf[W_RMAX, r], wf[W_PFRIC, r] = norm2, rmax, x.res[L_PFRIC, r]
+        if rmax > tol and stepper._stick_slow_nodes(v, ibuf, prm, n):
+            wi[W_PASS, r] = 0
+            return _await(si, x, wi, r, _POINT, True)
+        if (
+            rmax > tol
+            and wi[W_PASS, r] < maxit
+            and math.isfinite(norm2)
+            and not (wi[W_RENEW, r] and step == 1.0)
+        ):
+            out[O_NJAC] += 1.0  # _be_newton's Jacobian at the accepted iterate: the trial's
+        wi[W_PHASE, r] = _TOP
+    elif phase == _SOLVE:
+        if stepper._stick_reversing_nodes(v, dv, 1.0, buf[B_V0], ibuf, n):
+            wi[W_PASS, r] = 0
+            return _await(si, x, wi, r, _POINT, True)
+        renew = wf[W_RMAX, r] * wf[W_RMAX, r] > tol and wi[W_SEARCHED, r] != wi[W_PASS, r] - 1
+        wf[W_LS, r], wi[W_TRIALS, r], wi[W_RENEW, r] = 1.0, 0, renew
+        for k in range(n):
+            v[k] = vacc[k] + 1.0 * dv[k]
+        return _await(si, x, wi, r, _TRIAL, renew)
+    while True:
+        phase = wi[W_PHASE, r]
+        if phase == _STEP:
+            if wi[W_STEP, r] == wi[W_NSTEPS, r]:
+                stepper.ledger_energies(si)
+                return _ENDED
+            wi[W_NITER, r], wi[W_SUB, r] = 0, 0
+            for k in range(W_RESID, N_WORK):
+                wf[k, r] = 0.0
+            out[O_NJAC] = out[O_NRES] = out[O_NFACTOR] = 0.0
+            wi[W_PHASE, r] = _SUB
+        elif phase == _SUB:
+            status, p_act0 = stepper.move_rest_shape(si, u_k, u_l, dt)
+            wf[W_PACT0, r] = p_act0
+            if status != OK:
+                wi[W_STATUS, r], wi[W_PHASE, r] = status, _STEP_END
+                continue
+            stepper._be_start(si, MEDIUM_GROUND, 1.0)
+            _start_solve(si, x, p, r)
+            wi[W_IT, r], wi[W_PASS, r], wi[W_SEARCHED, r] = 0, 0, -1
+            return _await(si, x, wi, r, _POINT, True)
+        elif phase == _TOP:
+            if wf[W_RMAX, r] <= tol:
+                _store(si, x, r, False)
+                if not stepper._update_contacts(v, buf, ibuf, prm, dt, n):
+                    wi[W_STATUS, r], wi[W_PHASE, r] = OK, _SUB_END
+                    continue
+                wi[W_PASS, r] = 0
+                return _await(si, x, wi, r, _POINT, True)
+            if wi[W_PASS, r] == maxit or not math.isfinite(wf[W_NORM2, r]):
+                wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
+                continue
+            wi[W_IT, r] += 1
+            wi[W_PASS, r] += 1
+            out[O_NFACTOR] += 1.0
+            wi[W_PHASE, r] = _SOLVE
+            return _NEWTON_STEP
+        elif phase == _SUB_END:
+            _store(si, x, r, True)
+            _, ed, efr, ea = stepper.implicit_energies(si, u_k, dt, wf[W_PACT0, r], 0.0, wf[W_PFRIC, r])
+            wi[W_NITER, r] = max(wi[W_NITER, r], wi[W_IT, r])
+            wf[W_RESID, r] = max(wf[W_RESID, r], wf[W_RMAX, r])
+            wf[W_EDAMP, r] += ed
+            wf[W_EFRIC, r] += efr
+            wf[W_EACT, r] += ea
+            wi[W_SUB, r] += 1
+            done = wi[W_STATUS, r] != OK or wi[W_SUB, r] == int(prm[P_SUBSTEPS])
+            wi[W_PHASE, r] = _STEP_END if done else _SUB
+        else:  # _STEP_END
+            status = stepper.end_step(
+                si,
+                wi[W_STATUS, r],
+                wi[W_NITER, r],
+                wf[W_RESID, r],
+                0.0,
+                wf[W_EDAMP, r],
+                wf[W_EFRIC, r],
+                wf[W_EACT, r],
+            )
+            wi[W_STATUS, r] = status
+            wi[W_STEP, r] += 1
+            if status != OK:
+                stepper.ledger_energies(si)
+                return _ENDED
+            wi[W_PHASE, r] = _STEP
