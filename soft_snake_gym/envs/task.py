@@ -631,8 +631,9 @@ def _crawl(active, s, t, status, lo, hi, scratch):
 
     Each robot's task start (:func:`step_begin`), then the physics of all (``lanes.crawl``: each
     robot's ``stepper.simulate`` bit for bit), then each task end (:func:`step_end`): the robots
-    are independent, so each ends as :func:`robot_step` leaves it. Robots that ``lanes.crawl``
-    does not take, or with another ``h`` or sub-step count than the first, step one by one.
+    are independent, so each ends as :func:`robot_step` leaves it. Every active robot is
+    ``lanes.crawl_eligible`` (:func:`_crawls`); one with another ``h`` or sub-step count than the
+    first steps one by one.
     """
     x, p = scratch[0], scratch[1]
     m = hi - lo
@@ -643,10 +644,8 @@ def _crawl(active, s, t, status, lo, hi, scratch):
         if not active[i]:
             continue
         si, ti = _robot(s, t, i)
-        if not (
-            lanes.crawl_eligible(si.prm)
-            and (count == 0 or si.prm[L.P_H] == s.prm[robots[0], L.P_H])
-            and (count == 0 or si.prm[L.P_SUBSTEPS] == s.prm[robots[0], L.P_SUBSTEPS])
+        if count > 0 and (
+            si.prm[L.P_H] != s.prm[robots[0], L.P_H] or si.prm[L.P_SUBSTEPS] != s.prm[robots[0], L.P_SUBSTEPS]
         ):
             status[i] = robot_step(si, ti)
             continue

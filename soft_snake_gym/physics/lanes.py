@@ -948,7 +948,8 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
     n2 = s.q.shape[1]
     taken = 0
     for r in range(LANES):
-        taken = _take_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
+        wi[W_ROBOT, r] = -1
+        taken = _next_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
     while True:
         busy = False
         for r in range(LANES):
@@ -964,8 +965,7 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
             si = layout.sim_views(s.f[i], s.ibuf[i])
             awaits = _work(si, uk[i], ul[i], x, p, wi, wf, dt, r)
             if awaits == _ENDED:
-                status[wi[W_SLOT, r]] = wi[W_STATUS, r]
-                taken = _take_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
+                taken = _next_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
             solving |= awaits == _NEWTON_STEP
         if not solving:
             continue
@@ -982,8 +982,7 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
             if not _newton_step(si, x, dt, r):
                 wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
             if _work(si, uk[i], ul[i], x, p, wi, wf, dt, r) == _ENDED:
-                status[wi[W_SLOT, r]] = wi[W_STATUS, r]
-                taken = _take_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
+                taken = _next_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -1016,13 +1015,18 @@ def _newton_step(si, x, dt, r):
 
 
 @njit(cache=True, error_model="numpy")
-def _take_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r):
-    """Give lane ``r`` the next robot of ``robots`` after the first ``taken``; returns how many are taken now.
+def _next_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r):
+    """Record the status of lane ``r``'s ended job, if any, and give it the next robot after the first ``taken``.
 
-    Robots whose job ends before its first residual (a rest length that fails) end here; the
-    lane is left empty (``W_ROBOT`` -1) when none is left.
+    Returns how many are taken now. Robots whose job ends before its first residual (a rest
+    length that fails) end here too; the lane is left empty (``W_ROBOT`` -1) when none is left.
     """
-    while taken < robots.size:
+    while True:
+        if wi[W_ROBOT, r] >= 0:
+            status[wi[W_SLOT, r]] = wi[W_STATUS, r]
+        if taken == robots.size:
+            wi[W_ROBOT, r] = -1
+            return taken
         k = taken
         taken += 1
         i = robots[k]
@@ -1033,9 +1037,6 @@ def _take_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r):
             si.buf[B_LRATE, : si.lbar.size] = ul[i]
         if _work(si, uk[i], ul[i], x, p, wi, wf, dt, r) != _ENDED:
             return taken
-        status[k] = wi[W_STATUS, r]
-    wi[W_ROBOT, r] = -1
-    return taken
 
 
 @njit(cache=True, inline="always", error_model="numpy")

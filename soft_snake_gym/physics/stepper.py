@@ -766,6 +766,12 @@ def _bdf2_substep(s, dt, medium):
     return result
 
 
+@njit(cache=True, inline="always")
+def is_damped(prm):
+    """True if the rod has material damping (bending or stretching): its power is then summed."""
+    return prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0
+
+
 @njit(cache=True, error_model="numpy")
 def move_rest_shape(s, u_k, u_l, dt):
     """The start of an integrator's sub-step of ``dt``: the actuator power, then the rest shape moved.
@@ -794,7 +800,7 @@ def implicit_energies(s, u_k, dt, p_act0, p_fluid, p_fric):
     lrate, geo = buf[B_LRATE, : lbar.size], buf[B_GEO : B_GEO + 2]
     edge_geometry(q, geo)
     p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
-    p_damp = damping_power(q, v, prm, geo) if prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0 else 0.0
+    p_damp = damping_power(q, v, prm, geo) if is_damped(prm) else 0.0
     return dt * p_fluid, dt * p_damp, dt * p_fric, 0.5 * dt * (p_act0 + p_act1)
 
 
@@ -827,7 +833,7 @@ def simulate(s, u_k, u_l, n_steps):
     symplectic = int(prm[P_METHOD]) == METHOD_SYMPLECTIC_EULER
     sdirk2 = int(prm[P_METHOD]) == METHOD_SDIRK2
     bdf2 = int(prm[P_METHOD]) == METHOD_BDF2
-    damped = prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0
+    damped = is_damped(prm)
     tau = prm[P_LAG]
     lrate = buf[B_LRATE, : lbar.size]  # the length actuators' rates (docs/model.md §3)
     geo = buf[B_GEO : B_GEO + 2]  # the edge geometry of q for the powers (geometry.edge_geometry)
