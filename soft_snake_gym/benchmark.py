@@ -17,7 +17,11 @@ numbers move with the load:
     ``n_envs`` (the package's ``SoftEel-v0`` PPO hyperparameters, ``VecNormalize``), the two
     models' rounds interleaved as the throughput cases' are;
 (e) cost per robot step of the batched env against the number of nodes N = 10, 20, 50, 100
-    (the same 1.62 m, 7.2 kg body cut into N - 1 edges, swimming the thesis's serpenoid gait).
+    (the same 1.62 m, 7.2 kg body cut into N - 1 edges, swimming the thesis's serpenoid gait);
+(f) the machine's attainable peak, numpy's float64 matrix product (the BLAS's dgemm) on one
+    thread and on every core, measured in each round, and the floating-point work of our rows
+    against it: steps/s times the flops of a robot step counted from the kernels
+    (:data:`FLOPS_PER_STEP`), as a fraction of the peak on the row's threads.
 
 Throughput cases drive every env with uniform random actions in [-1, 1] (an untrained
 policy), resetting when an episode ends; two extra rows drive 256 batched eels with the
@@ -34,6 +38,7 @@ from __future__ import annotations
 import math
 import os
 import platform
+import re
 import statistics
 import time
 from collections.abc import Callable
@@ -43,6 +48,7 @@ from xml.etree import ElementTree
 import gymnasium as gym
 import numba
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.envs.registration import importable_id
@@ -67,6 +73,13 @@ TARGETS = {
 STRETCH = 30.0
 """Stretch goal of 256 eels against Swimmer-v5's single env, simulated s per wall s."""
 ENVPOOL_ROBOTS = 256
+FLOPS_PER_STEP = {"SoftEel-v0": 27_600, "SoftWorm-v0": 35_000}
+"""Floating-point operations of a robot step under random actions, counted from the kernels for
+the default bodies (docs/performance.md, "Floating-point work per robot step"): estimates, not
+measurements; the variants' rows (the gait, BDF2) do other work and are left out."""
+MATMUL_SIZE = 1000
+"""The side of the matrices whose product measures the peak: about 2 GFLOP a product."""
+_PLAIN_ROW = re.compile(r"^(SoftEel-v0|SoftWorm-v0) (gym\.make|batched n=\d+ threads=(\d+))$")
 
 
 # --- throughput cases ------------------------------------------------------------------------
@@ -179,6 +192,28 @@ def _kernel_share(case: _VectorCase, seconds: float) -> float:
     start = time.perf_counter()
     case.run(seconds)
     return venv.kernel_seconds / (time.perf_counter() - start)
+
+
+def matmul_rate(threads: int, seconds: float, n: int = MATMUL_SIZE) -> float:
+    """GFLOP/s of numpy's float64 ``n`` x ``n`` matrix product on ``threads`` BLAS threads, the best of ``seconds``' products.
+
+    The BLAS's dgemm keeps a core's vector units nearly full, so this is what the machine can
+    reach, measured on it (its nominal peak needs its clock and its vector units, which a
+    virtual machine need not report).
+    """
+    rng = np.random.default_rng(0)
+    a, b, out = rng.random((n, n)), rng.random((n, n)), np.empty((n, n))
+    best = 0.0
+    with threadpool_limits(threads, user_api="blas"):
+        np.matmul(a, b, out=out)  # the BLAS's threads started, its buffers allocated
+        start = time.perf_counter()
+        while True:
+            t0 = time.perf_counter()
+            np.matmul(a, b, out=out)
+            now = time.perf_counter()
+            best = max(best, 2.0 * n**3 / (now - t0))
+            if now - start >= seconds:
+                return best / 1e9
 
 
 def _have_mujoco() -> str | None:
@@ -396,10 +431,14 @@ def run_benchmark(
         for n, threads in ((1, 1), (envpool_robots, all_threads)):
             cases[f"EnvPool Swimmer-v4 n={n} threads={threads}"] = _EnvPoolCase(n, threads)
     rates: dict[str, list[float]] = {name: [] for name in cases}
+    peaks: dict[int, list[float]] = {threads: [] for threads in sorted({1, all_threads})}
     for r in range(repeats):
         for name, case in cases.items():
             say(f"round {r + 1}/{repeats}: {name}")
             rates[name].append(case.run(seconds))
+        for threads, rounds in peaks.items():
+            say(f"round {r + 1}/{repeats}: matmul peak, {threads} thread(s)")
+            rounds.append(matmul_rate(threads, min(seconds, 1.0)))
     rows = []
     for name, case in cases.items():
         rows.append(
@@ -446,6 +485,11 @@ def run_benchmark(
             "envpool_robots": envpool_robots,
         },
         "throughput": rows,
+        "peak": {
+            "matmul_size": MATMUL_SIZE,
+            "gflops": {str(t): statistics.median(v) for t, v in peaks.items()},
+            "rounds": {str(t): v for t, v in peaks.items()},
+        },
         "kernel_share": shares,
         "ppo": ppo_rows,
         "nodes": node_rows,
@@ -453,7 +497,32 @@ def run_benchmark(
         "envpool": envpool_missing or "installed",
     }
     res["ratios"] = _ratios(res)
+    res["compute"] = _compute(res)
     return res
+
+
+def _compute(res: dict[str, Any]) -> list[dict[str, Any]]:
+    """Our plain rows' floating-point work (:data:`FLOPS_PER_STEP`) against the peak measured on their threads."""
+    out = []
+    for r in res["throughput"]:
+        m = _PLAIN_ROW.match(r["case"])
+        if m is None:
+            continue
+        threads = m.group(3) or "1"
+        peak = res["peak"]["gflops"].get(threads)
+        if peak is None:
+            continue
+        gflops = r["steps_per_s"] * FLOPS_PER_STEP[m.group(1)] / 1e9
+        out.append(
+            {
+                "case": r["case"],
+                "flops_per_step": FLOPS_PER_STEP[m.group(1)],
+                "gflops": gflops,
+                "peak_gflops": peak,
+                "fraction_of_peak": gflops / peak,
+            }
+        )
+    return out
 
 
 def _threading_layer() -> str:
@@ -540,6 +609,24 @@ def _ratios(res: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _compute_lines(res: dict[str, Any]) -> list[str]:
+    """The report's table of :func:`_compute`'s rows, under the peak measured in the run."""
+    peak = res["peak"]["gflops"]
+    lines = [
+        "",
+        "floating-point work against the machine's peak (numpy's float64 matmul in this run: "
+        + ", ".join(f"{g:.1f} GFLOP/s on {t} thread(s)" for t, g in peak.items())
+        + "):",
+        f"  {'case':<48} {'flops/step':>10} {'GFLOP/s':>8} {'of peak':>8}",
+    ]
+    for r in res["compute"]:
+        lines.append(
+            f"  {r['case']:<48} {r['flops_per_step']:>10,} {r['gflops']:>8.2f} {100 * r['fraction_of_peak']:>7.1f} %"
+        )
+    lines.append("  (flops/step counted from the kernels for the default bodies under random actions)")
+    return lines
+
+
 def format_report(res: dict[str, Any]) -> str:
     """The results as plain-text tables with the ratios and the targets."""
     lines = [
@@ -561,6 +648,8 @@ def format_report(res: dict[str, Any]) -> str:
             f"{r['case']:<50} {r['steps_per_s']:>14,.0f} {r['dt']:>5.2f} {r['sim_s_per_s']:>13,.1f} {ratio}  [{rounds}]"
         )
     lines.append("(vs Swimmer-v5: in simulated seconds per wall second)")
+    if res.get("compute"):  # results written before the peak was measured have none
+        lines += _compute_lines(res)
     if res["kernel_share"]:
         lines += ["", "share of a batched step (1 thread) spent in the compiled call:"]
         for name, share in res["kernel_share"].items():

@@ -57,8 +57,18 @@ def test_benchmark_cli_writes_json_and_png(tmp_path, capsys):
         assert abs(r["sim_s_per_s"] - r["steps_per_s"] * r["dt"]) < 1e-9 * r["sim_s_per_s"]
     assert [r["N"] for r in res["nodes"]] == [10, 12]
     assert 0 < res["kernel_share"]["SoftEel-v0 batched n=2 threads=1"] < 1
+    # the peak is a real matrix product (any machine's BLAS makes more than 1 GFLOP/s on a core);
+    # our plain rows' work is steps/s x the counted flops, against the peak on their threads
+    assert res["peak"]["gflops"]["1"] > 1.0
+    compute = {r["case"]: r for r in res["compute"]}
+    assert sorted(compute) == sorted(cases[:4])
+    for case, flops in (("SoftEel-v0 batched n=2 threads=1", 27_600), ("SoftWorm-v0 gym.make", 35_000)):
+        row, steps = compute[case], next(r["steps_per_s"] for r in res["throughput"] if r["case"] == case)
+        assert row["flops_per_step"] == flops
+        assert abs(row["fraction_of_peak"] - steps * flops / 1e9 / res["peak"]["gflops"]["1"]) < 1e-12
     text = capsys.readouterr().out
     assert "targets (ratios measured in this run" in text and str(out) in text
+    assert "floating-point work against the machine's peak" in text
     if res["mujoco"] == "installed":
         assert "Swimmer-v5 gym.make" in cases
         assert res["ratios"]["single_vs_swimmer"] > 0 and res["ratios"]["worm_single_vs_swimmer"] > 0
@@ -187,3 +197,15 @@ def test_each_target_is_given_round_by_round_beside_the_ratio_of_the_medians():
     res["kernel_share"] = {}
     text = format_report({**res, "ratios": r})
     assert "rounds 1.25x to 2.50x" in text and "rounds 1.50x to 4.00x" in text
+    assert "against the machine's peak" not in text  # results from before the peak was measured
+    # the work of our plain rows (not the Swimmer's) against the peak on each row's threads
+    res["peak"] = {"gflops": {"1": 10.0, "2": 20.0}}
+    compute = {c["case"]: c for c in benchmark._compute(res)}
+    assert sorted(compute) == ["SoftWorm-v0 batched n=256 threads=2", "SoftWorm-v0 gym.make"]
+    assert compute["SoftWorm-v0 gym.make"]["gflops"] == pytest.approx(30_000 * 35_000 / 1e9)
+    assert compute["SoftWorm-v0 batched n=256 threads=2"]["fraction_of_peak"] == pytest.approx(
+        60_000 * 35_000 / 1e9 / 20.0
+    )
+    text = format_report({**res, "ratios": r, "compute": list(compute.values())})
+    assert "10.0 GFLOP/s on 1 thread(s), 20.0 GFLOP/s on 2 thread(s)" in text
+    assert "SoftWorm-v0 batched n=256 threads=2" in text and "10.5 %" in text
