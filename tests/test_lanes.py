@@ -214,6 +214,43 @@ def test_the_block_newton_leaves_every_robot_as_be_newton(stage):
     assert solved == LANES - 4  # ... and the block solved all the others itself
 
 
+def test_the_block_takes_as_many_chord_steps_as_be_newton_up_to_its_cap():
+    """First guesses off by about 0.05 m/s, tolerances from 1e-6 to 1e-12: stages of two to five iterations.
+
+    ``_be_newton`` takes chord steps while the residual contracts by at least the chord rate
+    (0.5) a step; the block follows it for up to ``CHORD_STEPS`` of them, every lane bit for
+    bit, and sends the lanes that need more (or a new Jacobian) to ``_be_newton``.
+    """
+    venv = _eels(seed=5)
+    sim, task = venv.batch.sim, venv.batch.task
+    _start_stages(tuple(sim), tuple(task), 0)
+    sim.prm[:, L.P_CHORD] = 0.5
+    sim.prm[:, L.P_TOL] = np.geomspace(1e-6, 1e-12, LANES)
+    sim.v[:] += 0.05 * np.random.default_rng(1).standard_normal(sim.v.shape)
+    sim.out[:, L.O_NJAC] = sim.out[:, L.O_NRES] = 0.0
+    f0, i0 = sim.f.copy(), sim.ibuf.copy()
+    want = np.empty((5, LANES))
+    _scalar_newton(tuple(sim), DT, want)
+    f_ref = sim.f.copy()
+    sim.f[:], sim.ibuf[:] = f0, i0
+    got = np.empty((5, LANES))
+    solved = _block_newton(tuple(sim), task.uk, np.ones(LANES, dtype=np.bool_), DT, got)
+    ref = L.sim_arrays_over(f_ref, i0)
+    new = L.sim_arrays_over(sim.f, sim.ibuf)
+    assert np.array_equal(_bits(got), _bits(want))
+    for name in ("q", "v", "out"):
+        assert np.array_equal(_bits(getattr(new, name)), _bits(getattr(ref, name))), name
+    for row in (L.B_F, L.B_R, L.B_A, L.B_Q0, L.B_V0, L.B_P0):
+        assert np.array_equal(_bits(new.buf[:, row]), _bits(ref.buf[:, row]))
+    # the stages _be_newton solved on the common path: one Jacobian, every iteration's residual
+    iterations = want[1].astype(int)
+    common = (ref.out[:, L.O_NJAC] == 1) & (ref.out[:, L.O_NRES] == iterations) & (want[0] == L.OK)
+    in_block = common & (iterations <= lanes.CHORD_STEPS + 1)
+    assert {2, 3, 4} <= set(iterations[in_block].tolist())  # one, two and three chord steps
+    assert (common & (iterations > lanes.CHORD_STEPS + 1)).any()  # more than the block takes
+    assert solved == in_block.sum()  # the block itself solved exactly those
+
+
 def test_the_vector_env_steps_blocks_and_leftovers_as_single_envs_with_two_threads():
     """35 eels (two blocks, three robots one by one) against the same eels robot by robot."""
     n = 2 * LANES + 3
