@@ -101,6 +101,28 @@ def _block_newton(s, uk, go, dt, result):
     return solved
 
 
+def _newton_both_ways(sim, uk, go):
+    """The stages set up in ``sim`` solved by ``_be_newton`` robot by robot, then from the same start by the block.
+
+    Asserts that every lane with ``go`` ends bit for bit as ``_be_newton`` leaves it (its
+    results, ``q``, ``v``, ``out`` and ``buf``'s rows); ``sim`` is left as the block leaves it.
+    Returns ``_be_newton``'s results and how many lanes the block solved itself.
+    """
+    f0, i0 = sim.f.copy(), sim.ibuf.copy()
+    want = np.empty((5, LANES))
+    _scalar_newton(tuple(sim), DT, want)
+    ref = L.sim_arrays_over(sim.f.copy(), i0)
+    sim.f[:], sim.ibuf[:] = f0, i0
+    got = np.empty((5, LANES))
+    solved = _block_newton(tuple(sim), uk, go, DT, got)
+    assert np.array_equal(_bits(got[:, go]), _bits(want[:, go]))
+    for name in ("q", "v", "out"):
+        assert np.array_equal(_bits(getattr(sim, name)[go]), _bits(getattr(ref, name)[go])), name
+    for row in (L.B_F, L.B_R, L.B_A, L.B_Q0, L.B_V0, L.B_P0):
+        assert np.array_equal(_bits(sim.buf[go, row]), _bits(ref.buf[go, row]))
+    return want, solved
+
+
 def _flat(a: np.ndarray) -> np.ndarray:
     """(LANES, ...) -> the block's flat layout, element i of lane r at i * LANES + r."""
     return np.ascontiguousarray(a.reshape(LANES, -1).T).ravel()
@@ -194,22 +216,9 @@ def test_the_block_newton_leaves_every_robot_as_be_newton(stage):
         for i in range(LANES):
             stepper._sdirk2_second_start(venv.batch.sims[i].arrays, L.MEDIUM_WATER)
     sim.v[7, 4] = np.nan
-    f0, i0 = sim.f.copy(), sim.ibuf.copy()
-    want = np.empty((5, LANES))
-    _scalar_newton(tuple(sim), DT, want)
-    f_ref = sim.f.copy()
-    sim.f[:], sim.ibuf[:] = f0, i0
-    got = np.empty((5, LANES))
-    solved = _block_newton(tuple(sim), task.uk, go, DT, got)
-    ref = L.sim_arrays_over(f_ref, i0)
-    new = L.sim_arrays_over(sim.f, sim.ibuf)
-    ran = go.copy()
-    assert np.array_equal(_bits(got[:, ran]), _bits(want[:, ran]))
-    for name in ("q", "v", "out"):
-        assert np.array_equal(_bits(getattr(new, name)[ran]), _bits(getattr(ref, name)[ran])), name
-    for row in (L.B_F, L.B_R, L.B_A, L.B_Q0, L.B_V0, L.B_P0):
-        assert np.array_equal(_bits(new.buf[ran, row]), _bits(ref.buf[ran, row]))
-    assert np.array_equal(_bits(new.f[13]), _bits(f0[13]))  # the lane that sat out is untouched
+    f0 = sim.f.copy()
+    want, solved = _newton_both_ways(sim, task.uk, go)
+    assert np.array_equal(_bits(sim.f[13]), _bits(f0[13]))  # the lane that sat out is untouched
     assert want[0, 7] == L.NOT_CONVERGED and want[1, 11] > 1  # those lanes really left the path
     assert solved == LANES - 4  # ... and the block solved all the others itself
 
@@ -228,23 +237,10 @@ def test_the_block_takes_as_many_chord_steps_as_be_newton_up_to_its_cap():
     sim.prm[:, L.P_TOL] = np.geomspace(1e-6, 1e-12, LANES)
     sim.v[:] += 0.05 * np.random.default_rng(1).standard_normal(sim.v.shape)
     sim.out[:, L.O_NJAC] = sim.out[:, L.O_NRES] = 0.0
-    f0, i0 = sim.f.copy(), sim.ibuf.copy()
-    want = np.empty((5, LANES))
-    _scalar_newton(tuple(sim), DT, want)
-    f_ref = sim.f.copy()
-    sim.f[:], sim.ibuf[:] = f0, i0
-    got = np.empty((5, LANES))
-    solved = _block_newton(tuple(sim), task.uk, np.ones(LANES, dtype=np.bool_), DT, got)
-    ref = L.sim_arrays_over(f_ref, i0)
-    new = L.sim_arrays_over(sim.f, sim.ibuf)
-    assert np.array_equal(_bits(got), _bits(want))
-    for name in ("q", "v", "out"):
-        assert np.array_equal(_bits(getattr(new, name)), _bits(getattr(ref, name))), name
-    for row in (L.B_F, L.B_R, L.B_A, L.B_Q0, L.B_V0, L.B_P0):
-        assert np.array_equal(_bits(new.buf[:, row]), _bits(ref.buf[:, row]))
+    want, solved = _newton_both_ways(sim, task.uk, np.ones(LANES, dtype=np.bool_))
     # the stages _be_newton solved on the common path: one Jacobian, every iteration's residual
     iterations = want[1].astype(int)
-    common = (ref.out[:, L.O_NJAC] == 1) & (ref.out[:, L.O_NRES] == iterations) & (want[0] == L.OK)
+    common = (sim.out[:, L.O_NJAC] == 1) & (sim.out[:, L.O_NRES] == iterations) & (want[0] == L.OK)
     in_block = common & (iterations <= lanes.CHORD_STEPS + 1)
     assert {2, 3, 4} <= set(iterations[in_block].tolist())  # one, two and three chord steps
     assert (common & (iterations > lanes.CHORD_STEPS + 1)).any()  # more than the block takes

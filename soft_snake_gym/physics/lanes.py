@@ -806,8 +806,8 @@ def newton(s, first, go, x, p, dt, result):
                 on[r] = False  # a renewed Jacobian, or the cap
         it = 1
         while _any_going(on, done):
-            # a chord step: the same factors, accepted if |R|^2 falls; another while the residual
-            # contracts as fast as a Newton step's (res1: each lane's last accepted iterate)
+            # a chord step: the same factors, accepted if |R|^2 falls; another while the largest
+            # residual shrinks by the chord rate or more (res1: each lane's last accepted iterate)
             it += 1
             _full_step(x, n2)
             residual(x, p, dt, False, res)
