@@ -794,7 +794,7 @@ def block_step(active, s, t, first, status, scratch):
             lanes.stage_end(x, p, stage)
             for r in range(n_lanes):
                 if go[r]:
-                    damped = p[lanes.L_DB, r] > 0.0 or p[lanes.L_D, r] > 0.0
+                    damped = stepper.is_damped(s.prm[first + r])
                     newton = (int(result[0, r]), int(result[1, r]), result[2, r], result[3, r], result[4, r])
                     sums = (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r])
                     state[r], (iters[r], acc[0, r], acc[1, r], acc[2, r], acc[3, r], acc[4, r]) = (
