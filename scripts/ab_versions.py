@@ -4,11 +4,12 @@ On a machine whose speed drifts by half from one minute to the next, two benchma
 compare; two codes measured round by round in the same process do. This script checks out
 ``--base`` (a commit) as a second package, ``ssg_base``, beside the installed one, and times both
 on the same cases, alternating: the single envs' ``step`` (unwrapped, random actions) and the
-vector env's whole ``step`` at 256 robots on one and two threads. It prints each case's median
+vector env's whole ``step`` at 256 robots (``--robots``) on one and two threads. It prints each case's median
 rate for both and the median and range of the per-round ratios.
 
     python scripts/ab_versions.py --base 292cc90                  # ~3 min once the caches are warm
     python scripts/ab_versions.py --base HEAD~1 --rounds 11 --seconds 2
+    python scripts/ab_versions.py --base HEAD~1 --robots 8 24 256   # PPO's 8 envs, a tail block, the benchmark's 256
 
 The copy lives in ``~/.cache/soft_snake_gym_ab/<commit>`` (its numba cache with it), so a second
 run against the same commit compiles nothing. Both packages register the same env ids; the script
@@ -72,18 +73,18 @@ def single(swim, inch, body: str, seconds: float, rng: np.random.Generator):
     return run
 
 
-def batched(vector, body: str, threads: int, seconds: float, rng: np.random.Generator):
-    """A round of 256 robots of ``body`` in the vector env: robot-steps per second over ``seconds``."""
-    env = (vector.SwimVectorEnv if body == "eel" else vector.InchVectorEnv)(num_envs=256, num_threads=threads)
+def batched(vector, body: str, n: int, threads: int, seconds: float, rng: np.random.Generator):
+    """A round of ``n`` robots of ``body`` in the vector env: robot-steps per second over ``seconds``."""
+    env = (vector.SwimVectorEnv if body == "eel" else vector.InchVectorEnv)(num_envs=n, num_threads=threads)
     env.reset(seed=0)
-    acts = rng.uniform(-1, 1, (50, 256) + env.single_action_space.shape)
+    acts = rng.uniform(-1, 1, (50, n) + env.single_action_space.shape)
 
     def run() -> float:
-        n, start = 0, time.perf_counter()
+        steps, start = 0, time.perf_counter()
         while time.perf_counter() - start < seconds:
-            env.step(acts[n % 50])
-            n += 1
-        return n * 256 / (time.perf_counter() - start)
+            env.step(acts[steps % 50])
+            steps += 1
+        return steps * n / (time.perf_counter() - start)
 
     return run
 
@@ -94,9 +95,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--base", required=True, help="the commit to compare against (any git revision)")
     parser.add_argument("--rounds", type=int, default=7, help="interleaved rounds per case (default 7)")
     parser.add_argument("--seconds", type=float, default=1.0, help="seconds per case and round (default 1)")
+    parser.add_argument(
+        "--robots",
+        type=int,
+        nargs="+",
+        default=[256],
+        help="vector env sizes (default 256; two threads from 64)",
+    )
     args = parser.parse_args(argv)
-    if args.rounds < 1 or not args.seconds > 0:
-        parser.error("--rounds must be at least 1 and --seconds positive")
+    if args.rounds < 1 or not args.seconds > 0 or min(args.robots) < 1:
+        parser.error("--rounds and --robots must be at least 1 and --seconds positive")
     sys.path.insert(0, str(base_copy(args.base)))
     codes = {}
     for name in ("soft_snake_gym", BASE_NAME):
@@ -105,10 +113,11 @@ def main(argv: list[str] | None = None) -> None:
     cases = {}
     for body in ("eel", "worm"):
         cases[f"{body}, single env"] = [single(s, i, body, args.seconds, rng) for s, i, _ in codes.values()]
-    for body in ("eel", "worm"):
-        for threads in (1, 2):
-            label = f"256 {body}s, {threads} thread{'s' if threads > 1 else ''}"
-            cases[label] = [batched(v, body, threads, args.seconds, rng) for _, _, v in codes.values()]
+    for n in args.robots:
+        for body in ("eel", "worm"):
+            for threads in (1, 2) if n >= 64 else (1,):
+                label = f"{n} {body}s, {threads} thread{'s' if threads > 1 else ''}"
+                cases[label] = [batched(v, body, n, threads, args.seconds, rng) for _, _, v in codes.values()]
     for now, base in cases.values():  # compile or load the caches outside the rounds
         now()
         base()

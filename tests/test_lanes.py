@@ -247,10 +247,26 @@ def test_the_block_takes_as_many_chord_steps_as_be_newton_up_to_its_cap():
     assert solved == in_block.sum()  # the block itself solved exactly those
 
 
-def test_the_vector_env_steps_blocks_and_leftovers_as_single_envs_with_two_threads():
-    """35 eels (two blocks, three robots one by one) against the same eels robot by robot."""
-    n = 2 * LANES + 3
-    actions = np.random.default_rng(7).uniform(-1, 1, (60, n, 8))
+def test_units_cover_every_robot_once_with_a_tail_block_from_tail_min():
+    """``batch_step``'s units: full blocks, then the robots left a block of their own from ``TAIL_MIN`` on."""
+    for n in range(1, 3 * LANES + 1):
+        units = T._units(n)
+        firsts = [T._first_robot(u, n) for u in range(units + 1)]
+        sizes = [b - a for a, b in zip(firsts, firsts[1:], strict=False)]
+        assert firsts[0] == 0 and firsts[-1] == n
+        rest = n % LANES
+        tail = [rest] if rest >= T.TAIL_MIN else [1] * rest
+        assert sizes == [LANES] * (n // LANES) + tail, n
+
+
+@pytest.mark.parametrize(("rest", "seed"), [(3, 7), (9, 11)])
+def test_the_vector_env_steps_blocks_and_leftovers_as_single_envs_with_two_threads(rest, seed):
+    """Two blocks of eels and three robots one by one, or a tail block of nine, against the same eels robot by robot.
+
+    With nine, robots of the tail block fail (seed 11: robots 39 and 40), and their lanes idle after.
+    """
+    n = 2 * LANES + rest
+    actions = np.random.default_rng(seed).uniform(-1, 1, (60, n, 8))
 
     def eels():
         venv = SoftVectorEnv("SoftEel-v0", n, num_threads=2, max_episode_steps=None, max_curvature_rate=30.0)
@@ -259,6 +275,8 @@ def test_the_vector_env_steps_blocks_and_leftovers_as_single_envs_with_two_threa
 
     status = _blocks_against_robot_step(eels, actions, threads=2)
     assert (status == L.OK).sum() > n // 2 and (status != L.OK).any()  # most swim, some fail
+    if rest >= T.TAIL_MIN:
+        assert (status[2 * LANES :] != L.OK).any()  # some in the tail block
 
 
 def test_robots_that_fail_inside_a_block_step_end_as_robot_step_leaves_them():

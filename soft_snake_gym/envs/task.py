@@ -667,17 +667,29 @@ def _crawl(active, s, t, status, lo, hi, scratch):
         status[i] = code[k]
 
 
+TAIL_MIN = 6
+"""The fewest robots past the last full block that go as a block of their own, the rest of its lanes
+idle: from 6 robots such a block costs less than the robots one by one (docs/performance.md,
+"The tail block")."""
+
+
 @njit(cache=True, inline="always")
 def _units(n):
-    """The units of work of ``n`` robots: the blocks of ``lanes.LANES``, then each robot left over."""
-    return n // lanes.LANES + n % lanes.LANES
+    """The units of work of ``n`` robots: the blocks of ``lanes.LANES``, the tail block, or each robot left over.
+
+    The robots past the last full block make one more block if they are ``TAIL_MIN`` or more.
+    """
+    rest = n % lanes.LANES
+    return n // lanes.LANES + (1 if rest >= TAIL_MIN else rest)
 
 
 @njit(cache=True, inline="always")
 def _first_robot(u, n):
     """The first robot of unit ``u`` of :func:`_units` (``n`` for ``u`` past the last)."""
     blocks = n // lanes.LANES
-    return u * lanes.LANES if u <= blocks else blocks * lanes.LANES + u - blocks
+    if u <= blocks:
+        return u * lanes.LANES
+    return n if n % lanes.LANES >= TAIL_MIN else blocks * lanes.LANES + u - blocks
 
 
 @njit(cache=True, error_model="numpy")
@@ -699,7 +711,7 @@ def _block_scratch(n2):
 def _step_unit(active, s, t, status, u, scratch):
     """Unit ``u`` of :func:`_units`: a block (:func:`_step_block`) or one robot past the last block."""
     blocks = status.size // lanes.LANES
-    if u < blocks:
+    if u < blocks or status.size % lanes.LANES >= TAIL_MIN:  # a full block or the tail block
         _step_block(active, s, t, status, u * lanes.LANES, scratch)
         return
     i = blocks * lanes.LANES + (u - blocks)
@@ -710,9 +722,10 @@ def _step_unit(active, s, t, status, u, scratch):
 
 @njit(cache=True, error_model="numpy")
 def _step_block(active, s, t, status, first, scratch):
-    """Robots ``first`` .. ``first + LANES - 1``: by :func:`block_step` if it takes them all, else one by one."""
-    together = active[first : first + lanes.LANES].any()  # a robot to step, and all eligible alike
-    for r in range(lanes.LANES):
+    """Robots ``first`` .. ``first + LANES - 1`` (fewer in the tail block): by :func:`block_step` if it takes them all, else one by one."""
+    count = min(lanes.LANES, status.size - first)
+    together = active[first : first + count].any()  # a robot to step, and all eligible alike
+    for r in range(count):
         i = first + r
         together &= block_eligible(s.prm[i], t.tp[i])
         together &= (
@@ -721,7 +734,7 @@ def _step_block(active, s, t, status, first, scratch):
     if together:
         block_step(active, s, t, first, status, scratch)
         return
-    for r in range(lanes.LANES):
+    for r in range(count):
         i = first + r
         if active[i]:
             si, ti = _robot(s, t, i)
@@ -755,7 +768,8 @@ def block_step(active, s, t, first, status, scratch):
     ``simulate``'s, so every robot ends bit for bit as :func:`robot_step` leaves it. A robot
     whose step fails is put back at once; the others after their last stage. An inactive robot's
     lane idles: the block computes it as it does a lane whose action is bad, and puts nothing of
-    it back (:func:`batch_step` leaves that robot alone).
+    it back (:func:`batch_step` leaves that robot alone). So do the lanes past the last robot in
+    the tail block, where ``lanes.take`` copies the last robot in again.
     """
     n_lanes = lanes.LANES
     x, p, result, sq, before, state, iters, acc, niter, resid, energy, go, ran = scratch
@@ -763,8 +777,9 @@ def block_step(active, s, t, first, status, scratch):
     niter[:] = 0  # simulate's sums over the sub-steps
     resid[:] = 0.0
     energy[:] = 0.0
+    count = min(n_lanes, status.size - first)
     for r in range(n_lanes):
-        if not active[first + r]:
+        if r >= count or not active[first + r]:
             state[r] = _IDLE
             continue
         si, ti = _robot(s, t, first + r)

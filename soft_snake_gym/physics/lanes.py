@@ -529,11 +529,12 @@ def eligible(prm):
 def take(s, uk, first, x, p):
     """Copy robots ``first`` .. ``first + LANES - 1`` of stacked ``SimArrays`` ``s`` (inputs ``uk``) into block ``x``.
 
-    Their state (:class:`Block`) and, into ``p``, their parameters (``L_*`` rows).
+    Their state (:class:`Block`) and, into ``p``, their parameters (``L_*`` rows). Lanes past the
+    last robot of ``s`` get the last robot again: their arithmetic stays that of a robot.
     """
     n2 = s.q.shape[1]
     for r in range(LANES):
-        i = first + r
+        i = min(first + r, s.q.shape[0] - 1)
         buf, prm = s.buf[i], s.prm[i]
         for k in range(n2):
             x.q[_ix(k, r)] = s.q[i, k]
