@@ -4,12 +4,12 @@ On a machine whose speed drifts by half from one minute to the next, two benchma
 compare; two codes measured round by round in the same process do. This script checks out
 ``--base`` (a commit) as a second package, ``ssg_base``, beside the installed one, and times both
 on the same cases, alternating: the single envs' ``step`` (unwrapped, random actions) and the
-vector env's whole ``step`` at 256 robots (``--robots``) on one and two threads. It prints each case's median
-rate for both and the median and range of the per-round ratios.
+vector env's whole ``step`` at 256 robots (or ``--robots``) on one and two threads. It prints each
+case's median rate for both and the median and range of the per-round ratios.
 
     python scripts/ab_versions.py --base 292cc90                  # ~3 min once the caches are warm
     python scripts/ab_versions.py --base HEAD~1 --rounds 11 --seconds 2
-    python scripts/ab_versions.py --base HEAD~1 --robots 8 24 256   # PPO's 8 envs, a tail block, the benchmark's 256
+    python scripts/ab_versions.py --base HEAD~1 --robots 8 24 256   # PPO's 8 envs, a tail block, 256
 
 The copy lives in ``~/.cache/soft_snake_gym_ab/<commit>`` (its numba cache with it), so a second
 run against the same commit compiles nothing. Both packages register the same env ids; the script

@@ -261,9 +261,9 @@ def test_units_cover_every_robot_once_with_a_tail_block_from_tail_min():
 
 @pytest.mark.parametrize(("rest", "seed"), [(3, 7), (9, 11)])
 def test_the_vector_env_steps_blocks_and_leftovers_as_single_envs_with_two_threads(rest, seed):
-    """Two blocks of eels and three robots one by one, or a tail block of nine, against the same eels robot by robot.
+    """Eels in two blocks and three one by one, or a tail block of nine, against the same eels robot by robot.
 
-    With nine, robots of the tail block fail (seed 11: robots 39 and 40), and their lanes idle after.
+    With nine, eels of the tail block fail (seed 11: eels 39 and 40), and their lanes idle after.
     """
     n = 2 * LANES + rest
     actions = np.random.default_rng(seed).uniform(-1, 1, (60, n, 8))

@@ -675,9 +675,9 @@ idle: from 6 robots such a block costs less than the robots one by one (docs/per
 
 @njit(cache=True, inline="always")
 def _units(n):
-    """The units of work of ``n`` robots: the blocks of ``lanes.LANES``, the tail block, or each robot left over.
+    """The units of work of ``n`` robots: the blocks of ``lanes.LANES``, then the robots left over.
 
-    The robots past the last full block make one more block if they are ``TAIL_MIN`` or more.
+    Those make one more block, the tail block, if they are ``TAIL_MIN`` or more; else a unit each.
     """
     rest = n % lanes.LANES
     return n // lanes.LANES + (1 if rest >= TAIL_MIN else rest)
@@ -722,7 +722,10 @@ def _step_unit(active, s, t, status, u, scratch):
 
 @njit(cache=True, error_model="numpy")
 def _step_block(active, s, t, status, first, scratch):
-    """Robots ``first`` .. ``first + LANES - 1`` (fewer in the tail block): by :func:`block_step` if it takes them all, else one by one."""
+    """Robots ``first`` .. ``first + LANES - 1`` (fewer in the tail block).
+
+    By :func:`block_step` if it takes them all, else one by one.
+    """
     count = min(lanes.LANES, status.size - first)
     together = active[first : first + count].any()  # a robot to step, and all eligible alike
     for r in range(count):
