@@ -674,22 +674,23 @@ idle: from 6 robots such a block costs less than the robots one by one (docs/per
 
 
 @njit(cache=True, inline="always")
-def _units(n):
-    """The units of work of ``n`` robots: the blocks of ``lanes.LANES``, then the robots left over.
+def _blocks(n):
+    """The blocks of ``n`` robots: the full blocks of ``lanes.LANES``, and the tail block if ``TAIL_MIN`` or more are left."""
+    return n // lanes.LANES + (1 if n % lanes.LANES >= TAIL_MIN else 0)
 
-    Those make one more block, the tail block, if they are ``TAIL_MIN`` or more; else a unit each.
-    """
-    rest = n % lanes.LANES
-    return n // lanes.LANES + (1 if rest >= TAIL_MIN else rest)
+
+@njit(cache=True, inline="always")
+def _units(n):
+    """The units of work of ``n`` robots: the :func:`_blocks`, then each robot left over."""
+    blocks = _blocks(n)
+    return blocks + max(0, n - blocks * lanes.LANES)
 
 
 @njit(cache=True, inline="always")
 def _first_robot(u, n):
     """The first robot of unit ``u`` of :func:`_units` (``n`` for ``u`` past the last)."""
-    blocks = n // lanes.LANES
-    if u <= blocks:
-        return u * lanes.LANES
-    return n if n % lanes.LANES >= TAIL_MIN else blocks * lanes.LANES + u - blocks
+    blocks = _blocks(n)
+    return min(u * lanes.LANES, n) if u <= blocks else blocks * lanes.LANES + u - blocks
 
 
 @njit(cache=True, error_model="numpy")
@@ -710,8 +711,8 @@ def _block_scratch(n2):
 @njit(cache=True, error_model="numpy")
 def _step_unit(active, s, t, status, u, scratch):
     """Unit ``u`` of :func:`_units`: a block (:func:`_step_block`) or one robot past the last block."""
-    blocks = status.size // lanes.LANES
-    if u < blocks or status.size % lanes.LANES >= TAIL_MIN:  # a full block or the tail block
+    blocks = _blocks(status.size)
+    if u < blocks:
         _step_block(active, s, t, status, u * lanes.LANES, scratch)
         return
     i = blocks * lanes.LANES + (u - blocks)
