@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import math
 import os
 import pickle
 import subprocess
@@ -17,16 +18,18 @@ from soft_snake_gym.physics import allocate_arrays, stepper
 from soft_snake_gym.physics.layout import B_FEXT, B_LRATE, B_R, I_FRICTION, SLIDING, STUCK, sim_views
 
 
-def test_body_from_curvature_puts_the_head_ahead_along_plus_x():
+@pytest.mark.parametrize("heading", [0.0, 2.5])
+def test_body_from_curvature_puts_the_head_ahead_along_the_heading(heading):
     kbar = np.array([0.3, -0.2, 0.1, 0.4])
-    x = body_from_curvature(kbar, np.full(5, 0.2), heading=0.0, com=(1.0, 2.0))
+    lbar = np.array([0.2, 0.18, 0.22, 0.2, 0.19])
+    x = body_from_curvature(kbar, lbar, heading=heading, com=(1.0, 2.0))
     chord = x[-1] - x[0]
-    assert chord[0] > 0 and abs(chord[1]) < 1e-12
+    assert math.atan2(chord[1], chord[0]) == pytest.approx(heading, abs=1e-12)
     w = np.array([0.5, 1, 1, 1, 1, 0.5])
     np.testing.assert_allclose(w @ x / w.sum(), [1.0, 2.0], atol=1e-12)
-    np.testing.assert_allclose(np.hypot(*np.diff(x, axis=0).T), 0.2)
+    np.testing.assert_allclose(np.hypot(*np.diff(x, axis=0).T), lbar)
     sim = Simulator(SimConfig(rod=Rod(N=6, edge_length=0.2)))
-    sim.reset(x=x)
+    sim.reset(x=x, lbar=lbar)
     np.testing.assert_allclose(sim.kappa, kbar, atol=1e-12)
 
 

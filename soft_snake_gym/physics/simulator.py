@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from soft_snake_gym.params import SimConfig
 from soft_snake_gym.physics import forces, geometry, stepper
@@ -120,18 +121,37 @@ def body_from_curvature(
     lbar = np.asarray(lbar, dtype=float)
     if kbar.ndim != 1 or lbar.ndim != 1 or kbar.size != lbar.size - 1:
         raise ValueError(f"kbar has shape {kbar.shape} and lbar {lbar.shape}: need (N-2,) and (N-1,)")
-    theta = np.zeros(lbar.size)
-    np.cumsum(2.0 * np.arctan(kbar / 2.0), out=theta[1:])
-    x = np.zeros((lbar.size + 1, 2))
-    np.cumsum(lbar * np.cos(theta), out=x[1:, 0])
-    np.cumsum(lbar * np.sin(theta), out=x[1:, 1])
-    cx, cy = x[-1].tolist()  # the chord, from node 0 at the origin
+    comx, comy = com
+    return _body(kbar, lbar, float(heading), float(comx), float(comy))
+
+
+@njit(cache=True, error_model="numpy")
+def _body(kbar, lbar, heading, comx, comy):
+    """:func:`body_from_curvature`'s arithmetic, every sum in node order (each env's reset builds one)."""
+    n = lbar.size
+    x = np.empty((n + 1, 2))
+    theta, cx, cy = 0.0, 0.0, 0.0
+    x[0, 0], x[0, 1] = 0.0, 0.0
+    for j in range(n):  # the chord, from node 0 at the origin
+        if j > 0:
+            theta += 2.0 * math.atan(kbar[j - 1] / 2.0)
+        cx += lbar[j] * math.cos(theta)
+        cy += lbar[j] * math.sin(theta)
+        x[j + 1, 0], x[j + 1, 1] = cx, cy
     turn = heading - math.atan2(cy, cx) if math.hypot(cx, cy) > 0 else heading
     c, s = math.cos(turn), math.sin(turn)
-    x = x @ np.array([[c, s], [-s, c]])
-    w = np.ones(x.shape[0])
-    w[0] = w[-1] = 0.5
-    return x - (w @ x) / w.sum() + np.asarray(com, dtype=float)
+    mx, my = 0.0, 0.0
+    for i in range(n + 1):
+        a, b = x[i, 0], x[i, 1]
+        x[i, 0], x[i, 1] = a * c - b * s, a * s + b * c
+        w = 0.5 if i == 0 or i == n else 1.0
+        mx += w * x[i, 0]
+        my += w * x[i, 1]
+    mx, my = mx / n, my / n  # the weights sum to n
+    for i in range(n + 1):
+        x[i, 0] = x[i, 0] - mx + comx
+        x[i, 1] = x[i, 1] - my + comy
+    return x
 
 
 def _as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
