@@ -8,9 +8,10 @@ import numpy as np
 from numba import njit
 
 from soft_snake_gym.params import SimConfig
-from soft_snake_gym.physics import forces, geometry, stepper
+from soft_snake_gym.physics import banded, forces, geometry, stepper
 from soft_snake_gym.physics import layout as L
 from soft_snake_gym.physics.banded import WIDTH, band_to_dense
+from soft_snake_gym.physics.cache import drop_stale_cache
 from soft_snake_gym.physics.layout import SimArrays, allocate_arrays
 
 __all__ = [
@@ -22,6 +23,9 @@ __all__ = [
     "node_masses",
     "pack_params",
 ]
+
+# the cached _simulate embeds stepper.simulate and the kernels it calls from these files
+drop_stale_cache(__file__, [m.__file__ for m in (banded, forces, geometry, L, stepper)])
 
 _MEDIA = {"none": L.MEDIUM_NONE, "water": L.MEDIUM_WATER, "ground": L.MEDIUM_GROUND}
 _ADDED_MASS = {"consistent": L.ADDED_MASS_CONSISTENT, "kelasidi": L.ADDED_MASS_KELASIDI}
@@ -152,6 +156,17 @@ def _body(kbar, lbar, heading, comx, comy):
         x[i, 0] = x[i, 0] - mx + comx
         x[i, 1] = x[i, 1] - my + comy
     return x
+
+
+@njit(cache=True, error_model="numpy")
+def _simulate(f, ibuf, u_k, u_l, n_steps):
+    """``stepper.simulate`` of the robot over its blocks ``f`` and ``ibuf`` (:meth:`Simulator.advance`).
+
+    Its views are made as the envs' kernels make theirs (``layout.sim_views``), so one compiled
+    ``simulate`` serves both: called with the plain tuple, numba compiled it a second time (about
+    8 s on a cold cache).
+    """
+    return stepper.simulate(L.sim_views(f, ibuf), u_k, u_l, n_steps)
 
 
 def _as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
@@ -348,7 +363,7 @@ class Simulator:
                 "call reset() or set_state() before stepping again"
             )
         uk, ul = self._inputs(u_k, u_l)
-        status = stepper.simulate(tuple(self.arrays), uk, ul, n_steps)  # a plain tuple: see layout
+        status = _simulate(self.arrays.f, self.arrays.ibuf, uk, ul, n_steps)
         if status != L.OK:
             self.failure = L.STATUS_REASONS[status]
             return False
