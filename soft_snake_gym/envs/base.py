@@ -46,9 +46,14 @@ def _compile_display(params: str, body: str) -> Callable[..., dict[str, Any]]:
     return eval(f"lambda {params}: {{{body}}}", {})
 
 
-def _entries(keys: tuple[str, ...], source: str, start: int) -> str:
-    """The body of a dict display of ``keys`` over ``source[start]``, ``source[start + 1]``, ..."""
-    return ", ".join(f"{key!r}: {source}[{start + i}]" for i, key in enumerate(keys))
+def _entry(key: str, value: str, mask: str | None) -> str:
+    """``key: value`` of a dict display; with ``mask``, Gymnasium's vector mask ``_key: mask`` after it."""
+    return f"{key!r}: {value}" if mask is None else f"{key!r}: {value}, {'_' + key!r}: {mask}"
+
+
+def _entries(keys: tuple[str, ...], source: str, start: int, mask: str | None = None) -> str:
+    """The body of a dict display of ``keys`` over ``source[start]``, ``source[start + 1]``, ... (:func:`_entry`)."""
+    return ", ".join(_entry(key, f"{source}[{start + i}]", mask) for i, key in enumerate(keys))
 
 
 SLOW_SUBSTEPS = 1000
@@ -222,8 +227,8 @@ class SoftRobotEnv(gym.Env):
                 for i, key in enumerate(views)
             ),
         )
+        self._shape_keys = tuple(views)
         state, rest = self._info_displays()
-        self._state_of = _compile_display("r, time, shape, niter", state)
         self._rest_of = _compile_display("r, out, failure", rest)
         # this robot's: the time and the iterations straight from ``out`` (one call less a step)
         own, _ = self._info_displays(time=f"out[{O_NSTEPS}] * h", niter=f"int(out[{O_NITER}])")
@@ -265,46 +270,67 @@ class SoftRobotEnv(gym.Env):
         return self._copy_shape(tuple(self._shape_views(raw, shape).values()))
 
     # --- info: the one place it is built (the vector env calls these too) -------------------
-    def _info_displays(self, time: str = "time", niter: str = "niter") -> tuple[str, str]:
+    def _info_displays(
+        self, time: str = "time", niter: str = "niter", masks: tuple[str, str] | None = None
+    ) -> tuple[str, str]:
         """The entries of ``info`` as the bodies of two dict displays, in their order.
 
         The state entries over ``r`` (the task state ``rs``), ``time``, ``shape`` (the dict of
         :meth:`_shape_info`) and ``niter`` (or the expressions given for the time and the
-        iterations); the rest over ``r``, ``out`` (the simulator's ``out``)
-        and ``failure``: the reward terms (``task.reward_terms``), the running metrics
-        (``task.episode_metrics``) and the energy ledger (``layout.energy_ledger``), from the same
-        keys and indices. ``r`` and ``out`` are lists for one robot; ``r`` may be the rows ``rs.T``
-        of a batch, over which the state entries are arrays.
+        iterations); the rest over ``r``, ``out`` (the simulator's ``out``) and ``failure``: the
+        reward terms, the running metrics (``task.episode_metrics``) and the energy ledger
+        (``layout.energy_ledger``), from the same keys and indices. ``r`` and ``out`` are lists
+        for one robot.
+
+        With ``masks`` (the names of the state's and the step's masks), the displays of a batch's
+        ``info``, as ``SyncVectorEnv`` gathers them: ``r`` the rows ``rs.T`` and ``out`` the
+        ledger's rows (``N_LEDGER``, n), every entry an array over robots followed by its
+        ``_key`` mask; ``failure`` closes the state, which the state's mask covers, and the rest
+        (the entries of a step) takes the step's.
         """
-        state = (
-            f"'x_position': r[{T.R_COMX}], 'y_position': r[{T.R_COMY}], 'heading': r[{T.R_HEADING}], "
-            f"'time': {time}, {self.medium_power_key!r}: r[{T.R_P_MED}], 'actuator_power': r[{T.R_P_ACT}], "
-            f"**shape, 'newton_iterations': {niter}"
+        m, ms = masks or (None, None)
+        shape = "**shape" if m is None else ", ".join(_entry(k, f"shape[{k!r}]", m) for k in self._shape_keys)
+        state = ", ".join(
+            (
+                _entry("x_position", f"r[{T.R_COMX}]", m),
+                _entry("y_position", f"r[{T.R_COMY}]", m),
+                _entry("heading", f"r[{T.R_HEADING}]", m),
+                _entry("time", time, m),
+                _entry(self.medium_power_key, f"r[{T.R_P_MED}]", m),
+                _entry("actuator_power", f"r[{T.R_P_ACT}]", m),
+                shape,
+                _entry("newton_iterations", niter, m),
+            )
         )
         if self.task_kind != T.TASK_DIRECTION:
             nav = "target_distance" if self.task_kind == T.TASK_GOAL else "cross_track_error"
-            state += f", {nav!r}: r[{T.R_NAV}], 'is_success': r[{T.R_SUCCESS}] > 0.0"  # SB3's success key
-        rest = (
-            f"'forward_speed': r[{T.R_FWD}], {_entries(self.term_keys, 'r', T.R_RF)}, 'failure': failure, "
-            f"'metrics': {{{_entries(self.metric_keys, 'r', T.M_AVG)}}}, "
-            f"'energy': {{{_entries(LEDGER_KEYS, 'out', O_LEDGER)}}}"
+            state += (
+                f", {_entry(nav, f'r[{T.R_NAV}]', m)}, {_entry('is_success', f'r[{T.R_SUCCESS}] > 0.0', m)}"
+            )
+        failure = _entry("failure", "failure", m)
+        ledger = ("out", O_LEDGER) if m is None else ("out", 0)
+        terms = f"{_entry('forward_speed', f'r[{T.R_FWD}]', ms)}, {_entries(self.term_keys, 'r', T.R_RF, ms)}"
+        groups = (
+            _entry("metrics", f"{{{_entries(self.metric_keys, 'r', T.M_AVG, ms)}}}", ms),
+            _entry("energy", f"{{{_entries(LEDGER_KEYS, *ledger, ms)}}}", ms),
         )
-        return state, rest
+        if m is None:
+            return state, ", ".join((terms, failure) + groups)
+        return f"{state}, {failure}", ", ".join((terms,) + groups)
 
-    def state_info(
-        self, r: Any, time: Any, shape: np.ndarray, newton_iterations: Any, raw: np.ndarray
-    ) -> dict[str, Any]:
-        """The state entries of ``info``, for this robot or, as arrays over robots, for a batch.
+    def batch_info(self) -> tuple[Callable[..., dict[str, Any]], Callable[..., dict[str, Any]]]:
+        """The builders of a batch's ``info`` (:meth:`_info_displays` with masks), for the vector env.
 
-        Args:
-            r: the task state ``task.rs`` as a list (one robot) or its rows ``rs.T`` (a batch; the
-                entries are then views of its rows).
-            time: simulated time [s].
-            shape: the driven rest shape (``shape_key``), a new array.
-            newton_iterations: Newton iterations of the last step.
-            raw: the unclipped observation ``task.raw``.
+        ``state(r, time, shape, niter, failure, m)``: the state entries and ``failure`` over
+        robots, masked by ``m``, from the rows ``r = rs.T``, the :meth:`_shape_info` of the batch
+        and arrays of the time, the iterations and the failures; ``rest(r, out, ms)``: the step's
+        entries masked by ``ms``, from the rows of the reward terms ``r`` and of the ledger ``out``.
         """
-        return self._state_of(r, time, self._shape_info(raw, shape), newton_iterations)
+        state, rest = self._info_displays(masks=("m", "ms"))
+        return (
+            _compile_display("r, time, shape, niter, failure, m", state),
+            _compile_display("r, out, ms", rest),
+        )
 
     def _check_options(self, body: dict[str, np.ndarray]) -> None:
         """Reject an initial body from ``reset(options=...)`` that violates the env's bounds."""
@@ -498,7 +524,7 @@ class SoftRobotEnv(gym.Env):
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
         for name in (  # made again on unpickling
             "_kernel_args", "_out", "_shape", "_own_views", "_copy_shape",
-            "_state_of", "_rest_of", "_own_state_of", "_info_of",
+            "_rest_of", "_own_state_of", "_info_of",
         ):  # fmt: skip
             del state[name]
         return state

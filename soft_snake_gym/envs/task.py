@@ -13,8 +13,8 @@ task's :class:`TaskArrays` (both stacked on a leading robot axis for :func:`batc
 passes them as plain tuples, which the kernels name on entry, or as their blocks, over which the
 kernels make the views again (see :mod:`soft_snake_gym.physics.layout`).
 Inside the kernels the task's scalars sit at named indices (``T_*`` in ``tp``, ``R_*`` and
-``M_*`` in ``rs``), as the simulator's do; Python reads them by name through
-:func:`reward_terms` and :func:`episode_metrics`.
+``M_*`` in ``rs``), as the simulator's do; Python reads them by name through the envs'
+``info`` displays (``SoftRobotEnv._info_displays``) and :func:`episode_metrics`.
 """
 
 from __future__ import annotations
@@ -39,7 +39,6 @@ __all__ = [
     "robot_reset",
     "batch_step",
     "batch_step_serial",
-    "reward_terms",
     "episode_metrics",
     "METRIC_KEYS",
     "NAV_METRIC_KEYS",
@@ -161,8 +160,8 @@ class TaskArrays(NamedTuple):
             reward weights, total mass), (N_TP,).
         rs: the task's state and the last step's results at ``R_*`` (status, centre of mass,
             heading, powers, forward speed, reward terms, reward) and the running episode
-            metrics at ``M_*`` (docs/model.md §8), (N_RS,); read them by name with
-            :func:`reward_terms` and :func:`episode_metrics`.
+            metrics at ``M_*`` (docs/model.md §8), (N_RS,); read them by name in ``info``
+            or with :func:`episode_metrics`.
         act: the action, clipped in place, (n_act,) [-].
         uk: curvature rates, (N-2,) [1/s].
         ul: rest-length rates, (N-1,) [m/s].
@@ -265,24 +264,13 @@ def allocate_task(N: int, n_act: int, n_obs: int, batch: tuple[int, ...] = (), n
     )
 
 
-def reward_terms(r: Any, keys: tuple[str, ...] = TERM_KEYS) -> dict[str, Any]:
-    """The forward speed [m/s] and the reward terms of the last step, by name, from ``rs``.
-
-    ``rs`` is a list for one robot, or ``rs.T``, rows over robots, for a batch; ``keys`` are
-    :data:`TERM_KEYS`, followed by :data:`NAV_TERM_KEYS` in a navigation task.
-    """
-    terms = {"forward_speed": r[R_FWD]}
-    # not strict: the slice is cut to the keys' length (the check cost a third of the call)
-    terms.update(zip(keys, r[R_RF : R_RF + len(keys)], strict=False))
-    return terms
-
-
 def episode_metrics(r: Any, keys: tuple[str, ...]) -> dict[str, Any]:
-    """The running episode metrics (docs/model.md §8) by name, from ``rs`` as for :func:`reward_terms`.
+    """The running episode metrics (docs/model.md §8) by name, from ``rs`` (a list, or its rows ``rs.T``).
 
     ``keys`` are :data:`METRIC_KEYS` with the medium's energy named.
     """
-    return dict(zip(keys, r[M_AVG : M_AVG + len(keys)], strict=False))  # not strict: as above
+    # not strict: the slice is cut to the keys' length (the check cost a third of the call)
+    return dict(zip(keys, r[M_AVG : M_AVG + len(keys)], strict=False))
 
 
 @njit(cache=True, error_model="numpy")

@@ -41,7 +41,6 @@ from soft_snake_gym.params import SimConfig, check_int
 from soft_snake_gym.physics import SimArrays, Simulator, allocate_arrays, layout
 from soft_snake_gym.physics.cache import drop_stale_cache
 from soft_snake_gym.physics.layout import (
-    LEDGER_KEYS,
     N_LEDGER,
     O_LEDGER,
     O_NITER,
@@ -352,6 +351,7 @@ class SoftVectorEnv(VectorEnv):
         self.metric_keys = proto.metric_keys
         """Names of the running episode metrics in ``info["metrics"]``."""
         self._proto = proto  # builds the infos, as each robot's env does
+        self._state_of, self._rest_of = proto.batch_info()
         self._act_shape = (n, n_act)
         self._shape = getattr(self.batch.sim, proto.shape_key)  # the driven rest shape, (n, N-2) or (n, N-1)
         self._status = np.zeros(n, dtype=np.int64)
@@ -532,7 +532,6 @@ class SoftVectorEnv(VectorEnv):
         entries are built by the same env methods).
         """
         n = self.num_envs
-        infos: dict[str, Any] = {}
         rows, terms, time_s, niter, shape, failed, ledger, flags = _info_rows(
             self.batch.task.rs,
             self.batch.sim.out,
@@ -546,33 +545,22 @@ class SoftVectorEnv(VectorEnv):
         )  # a robot whose step failed reports its last valid state, as the single env does
         any_stepped, all_present, any_reset, n_failed = flags
         if not (any_stepped or any_reset):
-            return infos
-        state = self._proto.state_info(rows, time_s, shape, niter, self.batch.task.raw)
+            return {}
         # one mask array per group of keys (read-only by convention)
-        mask = np.ones(n, dtype=np.bool_) if all_present else stepped | reset
+        mask = self._all.copy() if all_present else stepped | reset
+        shape = self._proto._shape_info(self.batch.task.raw, shape)
         if not all_present:
             hidden = ~mask
-            for value in state.values():
+            rows[:, hidden] = 0
+            for value in (time_s, niter, *shape.values()):
                 value[hidden] = 0
-        for key, value in state.items():
-            infos[key], infos[f"_{key}"] = value, mask
         failure = np.full(n, None, dtype=object)
         if n_failed:
             for i in np.flatnonzero(failed):
                 failure[i] = STATUS_REASONS[self._status[i]]
-        infos["failure"], infos["_failure"] = failure, mask
+        infos = self._state_of(rows, time_s, shape, niter, failure, mask)
         if any_stepped:
-            mask = stepped.copy()
-            for key, value in T.reward_terms(terms, self._proto.term_keys).items():
-                infos[key], infos[f"_{key}"] = value, mask
-            metrics: dict[str, Any] = {}
-            for key, value in T.episode_metrics(terms, self.metric_keys).items():
-                metrics[key], metrics[f"_{key}"] = value, mask
-            infos["metrics"], infos["_metrics"] = metrics, mask
-            energy: dict[str, Any] = {}
-            for key, value in zip(LEDGER_KEYS, ledger, strict=True):
-                energy[key], energy[f"_{key}"] = value, mask
-            infos["energy"], infos["_energy"] = energy, mask
+            infos.update(self._rest_of(terms, ledger, stepped.copy()))
         if any_reset:
             randomized: dict[str, Any] = {}
             for i, info in zip(np.flatnonzero(reset), reset_infos, strict=True):
