@@ -308,11 +308,11 @@ class SoftRobotEnv(gym.Env):
                 f", {_entry(nav, f'r[{T.R_NAV}]', m)}, {_entry('is_success', f'r[{T.R_SUCCESS}] > 0.0', m)}"
             )
         failure = _entry("failure", "failure", m)
-        ledger = ("out", O_LEDGER) if m is None else ("out", 0)
+        ledger = O_LEDGER if m is None else 0  # a batch's ledger rows start at 0
         terms = f"{_entry('forward_speed', f'r[{T.R_FWD}]', ms)}, {_entries(self.term_keys, 'r', T.R_RF, ms)}"
         groups = (
             _entry("metrics", f"{{{_entries(self.metric_keys, 'r', T.M_AVG, ms)}}}", ms),
-            _entry("energy", f"{{{_entries(LEDGER_KEYS, *ledger, ms)}}}", ms),
+            _entry("energy", f"{{{_entries(LEDGER_KEYS, 'out', ledger, ms)}}}", ms),
         )
         if m is None:
             return state, ", ".join((terms, failure) + groups)

@@ -80,11 +80,12 @@ drop_stale_cache(__file__, [layout.__file__])  # the cached step passes embed la
 def _start_step(actions, act, stepping, out, shape, prev, prev_shape, status):
     """Before a batched step: ``actions`` into ``act``; the first stepping robot with a non-finite one (-1 if none).
 
-    ``actions`` float32 (a policy's) or float64, converted as they are copied (numpy's casting
-    assignment took 5 µs for 256 eels' actions). If there is none, records each robot's step count and Newton iterations (``out``) into
-    ``prev`` (n, 2) and its rest ``shape`` into ``prev_shape`` (what a robot whose step fails
-    reports), and sets every ``status`` to ``OK``. One compiled pass instead of a dozen array
-    operations, whose calls cost more than the work at hundreds of robots.
+    ``actions`` are float32 (a policy's) or float64, converted as they are copied (in the same
+    pass as the check, instead of numpy's casting assignment before it). If no action is bad,
+    records each robot's step count and Newton iterations (``out``) into ``prev`` (n, 2) and its
+    rest ``shape`` into ``prev_shape`` (what a robot whose step fails reports), and sets every
+    ``status`` to ``OK``. One compiled pass instead of a dozen array operations, whose calls
+    cost more than the work at hundreds of robots.
     """
     n, k = act.shape
     bad = -1
