@@ -273,7 +273,7 @@ def episode_metrics(r: Any, keys: tuple[str, ...]) -> dict[str, Any]:
     return dict(zip(keys, r[M_AVG : M_AVG + len(keys)], strict=False))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _observe(s, t, curved):
     """The observation into ``t.obs``; returns the heading.
 
@@ -433,7 +433,7 @@ def robot_step(s, t):
     return status
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def step_begin(s, t):
     """The start of :func:`robot_step`: the action clipped and scaled to the rates in ``t.uk``/``t.ul``.
 
@@ -452,7 +452,7 @@ def step_begin(s, t):
     return observe.scale_rates(act, tp[T_SCALE], ul, tp[T_LO], tp[T_HI], dt, ul)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def energies_before(s):
     """The energy totals :func:`step_end` needs from before the physics: actuator, its work, the medium's."""
     out = s.out
@@ -460,7 +460,7 @@ def energies_before(s):
     return out[L.O_E_ACT], out[L.O_W_ACT], out[L.O_E_FRICTION] if ground else out[L.O_E_FLUID]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def step_end(s, t, status, sq, before, curved):
     """The end of :func:`robot_step`, after the physics ended with ``status``.
 

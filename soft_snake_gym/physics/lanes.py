@@ -558,7 +558,7 @@ def take(s, uk, first, x, p):
         p[L_TOL, r], p[L_MAXIT, r], p[L_CHORD, r] = prm[P_TOL], prm[P_MAXIT], prm[P_CHORD]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def put(s, i, x, r, v):
     """Copy lane ``r`` of block ``x`` back into robot ``i`` of ``s``, with the velocity from ``v`` (``x.v`` or ``x.guess``).
 
@@ -688,7 +688,7 @@ def stage_end(x, p, stage):
             power[1, r] += db * kd * kd if db > 0.0 else 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def curvatures_into(x, r, raw):
     """Lane ``r``'s curvatures and their rates from the last :func:`stage_end` into ``raw[:2 (N-2)]``."""
     for j in range(2 * (x.kbar.size // LANES)):

@@ -884,7 +884,7 @@ def simulate(s, u_k, u_l, n_steps):
     return status
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def end_step(s, status, niter, resid, e_fluid, e_damp, e_fric, e_act):
     """Close a step of ``h``: check the state (unless it failed already) and record the step in ``out``.
 
