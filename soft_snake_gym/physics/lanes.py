@@ -442,33 +442,40 @@ def factor(J, kept, n):
     ``kept[r]`` becomes False where ``band_factor`` would exchange rows (or find the band
     singular); that lane's factors are then not ``band_factor``'s. Where the band is whole
     (``k + KL < n``, ``k + KU < n``) each lane's column is straight-line code, as in
-    ``band_factor``'s own loops of constant length, with its skip of zero multipliers.
+    ``band_factor``'s own loops of constant length, and the lane loops are vector code: the
+    pivot test without short-circuits, the row updates without ``band_factor``'s skip of zero
+    multipliers, whose branch kept the loop scalar. The skip changes no bit of a finite band:
+    the bands (:func:`residual`, :func:`ground_residual`) start at +0 and only add or set +0, an
+    update ``x - f u`` gives -0 only from ``x`` = -0, so no entry an update reads is -0, and
+    ``x - (±0) u`` is ``x`` for every other ``x`` and finite ``u``. Where a lane's band holds an
+    infinity or a NaN its factors may differ from ``band_factor``'s; its residual is not finite
+    then either, and the lane is solved elsewhere (``_be_newton``).
     """
     for r in range(LANES):
         kept[r] = True
     for k in range(n):
-        whole = k + KL < n and k + KU < n
-        for r in range(LANES):  # band_factor's test: the diagonal >= threshold x the largest below
-            diag = abs(J[_jx(k, KL, r)])
-            best = diag
-            if whole:
+        if k + KL < n and k + KU < n:  # the whole band
+            for r in range(LANES):  # band_factor's test: the diagonal >= threshold x the largest below
+                diag = abs(J[_jx(k, KL, r)])
+                best = diag
                 for e in range(1, KL + 1):
                     best = max(best, abs(J[_jx(k + e, KL - e, r)]))
-            else:
-                for i in range(k + 1, n):
-                    best = max(best, abs(J[_jx(i, k - i + KL, r)]))
-            kept[r] = kept[r] and diag >= PIVOT_THRESHOLD * best and best > 0.0
-        if whole:
+                kept[r] = kept[r] & (diag >= PIVOT_THRESHOLD * best) & (best > 0.0)
             for r in range(LANES):
                 inv = 1.0 / J[_jx(k, KL, r)]  # the factors hold the pivot's reciprocal, as band_factor's
                 J[_jx(k, KL, r)] = inv
                 for e in range(1, KL + 1):
                     f = J[_jx(k + e, KL - e, r)] * inv
                     J[_jx(k + e, KL - e, r)] = f
-                    if f != 0.0:
-                        for c in range(1, KU + 1):
-                            J[_jx(k + e, KL - e + c, r)] -= f * J[_jx(k, KL + c, r)]
+                    for c in range(1, KU + 1):
+                        J[_jx(k + e, KL - e + c, r)] -= f * J[_jx(k, KL + c, r)]
             continue
+        for r in range(LANES):
+            diag = abs(J[_jx(k, KL, r)])
+            best = diag
+            for i in range(k + 1, n):
+                best = max(best, abs(J[_jx(i, k - i + KL, r)]))
+            kept[r] = kept[r] and diag >= PIVOT_THRESHOLD * best and best > 0.0
         for r in range(LANES):
             J[_jx(k, KL, r)] = 1.0 / J[_jx(k, KL, r)]
         for i in range(k + 1, min(n, k + KL + 1)):
