@@ -897,14 +897,18 @@ def ground_residual(x, p, dt, res):
             R[_ix(r0, r)] = vx if held else R[_ix(r0, r)] - dt * fx
             R[_ix(r1, r)] = vy if held else R[_ix(r1, r)] - dt * fy
             res[L_PFRIC, r] -= 0.0 if held else fx * vx + fy * vy
-            for c in range(BAND):  # a held node's rows: their assembled diagonal alone
-                if c != KL:
-                    J[_jx(r0, c, r)] = 0.0 if held else J[_jx(r0, c, r)]
-                    J[_jx(r1, c, r)] = 0.0 if held else J[_jx(r1, c, r)]
-            J[_jx(r0, KL, r)] = J[_jx(r0, KL, r)] if held else J[_jx(r0, KL, r)] + -dt * d00
-            J[_jx(r0, KL + 1, r)] = 0.0 if held else J[_jx(r0, KL + 1, r)] + -dt * d01
-            J[_jx(r1, KL - 1, r)] = 0.0 if held else J[_jx(r1, KL - 1, r)] + -dt * d10
-            J[_jx(r1, KL, r)] = J[_jx(r1, KL, r)] if held else J[_jx(r1, KL, r)] + -dt * d11
+            # stores of every lane (a store kept where a lane is held would be a masked store,
+            # slow on some CPUs); a held diagonal gains +0, which leaves it as it is (it is no -0)
+            J[_jx(r0, KL, r)] += 0.0 if held else -dt * d00
+            J[_jx(r0, KL + 1, r)] += -dt * d01
+            J[_jx(r1, KL - 1, r)] += -dt * d10
+            J[_jx(r1, KL, r)] += 0.0 if held else -dt * d11
+        for r in range(LANES):  # a held node's rows: their assembled diagonal alone
+            if stuck[_ix(i, r)] != 0.0:
+                for c in range(BAND):
+                    if c != KL:
+                        J[_jx(r0, c, r)] = 0.0
+                        J[_jx(r1, c, r)] = 0.0
     for r in range(LANES):
         res[L_NORM2, r] = 0.0
         res[L_RMAX, r] = 0.0
