@@ -4,11 +4,13 @@ On a machine whose speed drifts by half from one minute to the next, two benchma
 compare; two codes measured round by round in the same process do. This script checks out
 ``--base`` (a commit) as a second package, ``ssg_base``, beside the installed one, and times both
 on the same cases, alternating: the single envs' ``step`` (unwrapped, random actions) and the
-vector env's whole ``step`` at 256 robots (or ``--robots``) on one and two threads. It prints each
-case's median rate for both and the median and range of the per-round ratios.
+vector env's whole ``step`` at 256 robots (or ``--robots``) on one and two threads, each code first
+in every other round (the code that ran second was measured 1.02 to 1.06 times faster against
+itself, ``--base HEAD``). It prints each case's median rate for both and the median and range of
+the per-round ratios. ``--base HEAD`` with the tree clean measures the method's own spread.
 
     python scripts/ab_versions.py --base 292cc90                  # ~3 min once the caches are warm
-    python scripts/ab_versions.py --base HEAD~1 --rounds 11 --seconds 2
+    python scripts/ab_versions.py --base HEAD~1 --rounds 8 --seconds 2
     python scripts/ab_versions.py --base HEAD~1 --robots 8 24 256   # PPO's 8 envs, a tail block, 256
 
 The copy lives in ``~/.cache/soft_snake_gym_ab/<commit>`` (its numba cache with it), so a second
@@ -93,7 +95,9 @@ def main(argv: list[str] | None = None) -> None:
     """Time both codes on every case, interleaved, and print the table."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--base", required=True, help="the commit to compare against (any git revision)")
-    parser.add_argument("--rounds", type=int, default=7, help="interleaved rounds per case (default 7)")
+    parser.add_argument(
+        "--rounds", type=int, default=8, help="interleaved rounds per case (default 8: each code first in 4)"
+    )
     parser.add_argument("--seconds", type=float, default=1.0, help="seconds per case and round (default 1)")
     parser.add_argument(
         "--robots",
@@ -124,9 +128,13 @@ def main(argv: list[str] | None = None) -> None:
     rates = {label: ([], []) for label in cases}
     for r in range(args.rounds):
         print(f"round {r + 1}/{args.rounds}", file=sys.stderr)
-        for label, (now, base) in cases.items():
-            rates[label][0].append(base())
-            rates[label][1].append(now())
+        for label, (now, base) in cases.items():  # each code first in every other round
+            if r % 2:
+                rates[label][1].append(now())
+                rates[label][0].append(base())
+            else:
+                rates[label][0].append(base())
+                rates[label][1].append(now())
     print(f"now against {args.base}: steps/s (single envs) or robot-steps/s, medians of {args.rounds} rounds")
     print(f"{'case':22s} {'base':>10s} {'now':>10s}  now/base: median (range)")
     for label, (base, now) in rates.items():

@@ -16,7 +16,9 @@ loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/
 - a lane loop runs ``LANES`` = 16 iterations, the least that LLVM's loop vectorizer takes on
   (on AVX-512 two registers of eight doubles);
 - indices are unsigned (no negative-index test per access), and a flag that chooses between
-  paths (``jac``) is a constant in each compiled body, or the loop runs both paths masked.
+  paths (``jac``) is a constant in each compiled body, or the loop runs both paths masked;
+- no branch per lane and no store that some lanes make and others skip (LLVM makes it a masked
+  store, slow on AMD's cores): each lane computes what every lane does and picks its values.
 
 **Bit for bit the scalar step.** The kernels do the scalar kernels' operations in the same
 order, so each lane's numbers are the ones :func:`stepper._be_residual`, ``band_factor`` and
@@ -449,7 +451,8 @@ def factor(J, kept, n):
     update ``x - f u`` gives -0 only from ``x`` = -0, so no entry an update reads is -0, and
     ``x - (±0) u`` is ``x`` for every other ``x`` and finite ``u``. Where a lane's band holds an
     infinity or a NaN its factors may differ from ``band_factor``'s; its residual is not finite
-    then either, and the lane is solved elsewhere (``_be_newton``).
+    then either, where ``_be_newton`` uses no factors (a swimmer's lane is solved on its robot,
+    a worm's job gives up as ``_be_newton`` does).
     """
     for r in range(LANES):
         kept[r] = True
@@ -898,7 +901,7 @@ def ground_residual(x, p, dt, res):
             R[_ix(r1, r)] = vy if held else R[_ix(r1, r)] - dt * fy
             res[L_PFRIC, r] -= 0.0 if held else fx * vx + fy * vy
             # stores of every lane (a store kept where a lane is held would be a masked store,
-            # slow on some CPUs); a held diagonal gains +0, which leaves it as it is (it is no -0)
+            # slow on AMD's cores); a held diagonal gains +0, which leaves it as it is (it is no -0)
             J[_jx(r0, KL, r)] += 0.0 if held else -dt * d00
             J[_jx(r0, KL + 1, r)] += -dt * d01
             J[_jx(r1, KL - 1, r)] += -dt * d10
