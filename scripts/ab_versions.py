@@ -9,9 +9,19 @@ in every other round (the code that ran second was measured 1.02 to 1.06 times f
 itself, ``--base HEAD``). It prints each case's median rate for both and the median and range of
 the per-round ratios. ``--base HEAD`` with the tree clean measures the method's own spread.
 
+One process is not enough for a change of a few percent. Where the two codes' machine code and
+arrays land in memory differs from one process to the next, and so does their speed: the same
+kernels (this tree against a commit that changed only docstrings; the compiled call of 256 eels
+on one thread) measured 0.93, 0.99, 0.99, 1.00 and 0.99 times the base in five processes, the
+first with a range of 0.89-0.95 over its 8 rounds.
+``--processes K`` runs the comparison in K fresh processes one after the other and prints, for
+each case, the median of the processes' ratios and their range (the range of the processes,
+not of the rounds).
+
     python scripts/ab_versions.py --base 292cc90                  # ~3 min once the caches are warm
     python scripts/ab_versions.py --base HEAD~1 --rounds 8 --seconds 2
     python scripts/ab_versions.py --base HEAD~1 --robots 8 24 256   # PPO's 8 envs, a tail block, 256
+    python scripts/ab_versions.py --base HEAD~1 --processes 5 --rounds 4   # for a change of a few %
 
 The copy lives in ``~/.cache/soft_snake_gym_ab/<commit>`` (its numba cache with it), so a second
 run against the same commit compiles nothing. Both packages register the same env ids; the script
@@ -23,9 +33,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import io
+import json
 import subprocess
 import sys
 import tarfile
+import tempfile
 import time
 from pathlib import Path
 
@@ -106,9 +118,35 @@ def main(argv: list[str] | None = None) -> None:
         default=[256],
         help="vector env sizes (default 256; two threads from 64)",
     )
+    parser.add_argument(
+        "--processes", type=int, default=1, help="fresh processes to repeat it in (default 1; see above)"
+    )
+    parser.add_argument("--json", help=argparse.SUPPRESS)  # a process of --processes writes its rates here
     args = parser.parse_args(argv)
-    if args.rounds < 1 or not args.seconds > 0 or min(args.robots) < 1:
-        parser.error("--rounds and --robots must be at least 1 and --seconds positive")
+    if args.rounds < 1 or not args.seconds > 0 or min(args.robots) < 1 or args.processes < 1:
+        parser.error("--rounds, --robots and --processes must be at least 1 and --seconds positive")
+    base_copy(args.base)  # made once, before any process needs it
+    if args.processes == 1:
+        rates = measure(args)
+        if args.json:
+            Path(args.json).write_text(json.dumps(rates))
+            return
+        runs = [rates]
+    else:
+        runs = []
+        same = ["--base", args.base, "--rounds", str(args.rounds), "--seconds", str(args.seconds), "--robots"]
+        with tempfile.TemporaryDirectory() as tmp:
+            for k in range(args.processes):
+                print(f"process {k + 1}/{args.processes}", file=sys.stderr)
+                out = Path(tmp) / f"{k}.json"
+                cmd = [sys.executable, __file__, *same, *map(str, args.robots), "--json", str(out)]
+                subprocess.run(cmd, check=True)
+                runs.append(json.loads(out.read_text()))
+    report(args, runs)
+
+
+def measure(args: argparse.Namespace) -> dict[str, tuple[list[float], list[float]]]:
+    """One process's interleaved rounds: each case's rates, (base, now), round by round."""
     sys.path.insert(0, str(base_copy(args.base)))
     codes = {}
     for name in ("soft_snake_gym", BASE_NAME):
@@ -135,10 +173,25 @@ def main(argv: list[str] | None = None) -> None:
             else:
                 rates[label][0].append(base())
                 rates[label][1].append(now())
-    print(f"now against {args.base}: steps/s (single envs) or robot-steps/s, medians of {args.rounds} rounds")
-    print(f"{'case':22s} {'base':>10s} {'now':>10s}  now/base: median (range)")
-    for label, (base, now) in rates.items():
-        ratio = np.array(now) / np.array(base)
+    return rates
+
+
+def report(args: argparse.Namespace, runs: list[dict[str, tuple[list[float], list[float]]]]) -> None:
+    """The table: each case's median rates over every round; its ratio's median and range.
+
+    Over the rounds with one process, over the processes' own medians with several.
+    """
+    k = len(runs)
+    what = f"{args.rounds} rounds" if k == 1 else f"{k} processes of {args.rounds} rounds"
+    print(f"now against {args.base}: steps/s (single envs) or robot-steps/s, medians of {what}")
+    print(
+        f"{'case':22s} {'base':>10s} {'now':>10s}  now/base: median (range{'' if k == 1 else ' of processes'})"
+    )
+    for label in runs[0]:
+        base = np.concatenate([run[label][0] for run in runs])
+        now = np.concatenate([run[label][1] for run in runs])
+        ratios = [np.array(run[label][1]) / np.array(run[label][0]) for run in runs]
+        ratio = ratios[0] if k == 1 else np.array([np.median(r) for r in ratios])
         print(
             f"{label:22s} {np.median(base):10,.0f} {np.median(now):10,.0f}  "
             f"{np.median(ratio):.2f} ({ratio.min():.2f}-{ratio.max():.2f})"
