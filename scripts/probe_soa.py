@@ -1,6 +1,6 @@
 """Robots innermost (structure of arrays): does numba vectorize the step's kernels across robots?
 
-The first measurement for a structure-of-arrays batched kernel (docs/performance.md, "The
+The first measurement for a structure-of-arrays batched kernel (docs/performance_history.md, "The
 layout and the vectorizer"), on eels taken from random-action episodes, each kernel with the
 package's own arithmetic:
 

@@ -1,7 +1,7 @@
 """Where a robot step's time goes: Newton's work per step and the compiled parts, timed inside numba.
 
 Drives 15 batched eels (fewer than a block of ``lanes.LANES``, so robot by robot: the path whose
-kernels it times; the blocks' own parts are in docs/performance.md, "Sixteen eels per
+kernels it times; the blocks' own parts are in docs/performance_history.md, "Sixteen eels per
 instruction") with uniform random actions (an untrained policy, the benchmark's load) and with
 the thesis gait, counts Newton iterations per step, compares the water's
 integrators (CPU time per robot step of the batched env on one thread, interleaved rounds in

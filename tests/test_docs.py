@@ -1,7 +1,8 @@
 """The repository stands alone.
 
 Its documents and code refer to the model in docs/model.md, never to a file outside the repository,
-and every section they cite exists there, as does every section of docs/performance.md they name.
+and every section they cite exists there, as does every section of docs/performance.md and
+docs/performance_history.md they name.
 """
 
 from __future__ import annotations
@@ -51,18 +52,19 @@ def test_every_cited_section_of_the_model_exists():
     assert cited <= sections, f"cited but missing in docs/model.md: {sorted(cited - sections)}"
 
 
-def test_every_named_section_of_the_performance_notes_exists():
-    perf = (ROOT / "docs" / "performance.md").read_text()
-    headings = {h.strip() for h in re.findall(r"^#{2,3} (.+)$", perf, flags=re.M)}
+@pytest.mark.parametrize("name", ["performance", "performance_history"])
+def test_every_named_section_of_the_performance_notes_exists(name):
+    notes = (ROOT / "docs" / f"{name}.md").read_text()
+    headings = {h.strip() for h in re.findall(r"^#{2,3} (.+)$", notes, flags=re.M)}
     named = set()
     for f in _tracked_text_files():
         # a citation may wrap onto the next line of a comment or docstring
         text = re.sub(r"\s*\n\s*(?:#\s*)?", " ", f.read_text(errors="replace"))
-        named |= set(re.findall(r'docs/performance\.md, "([^"]+)"', text))
-    assert named, "nothing names a section of docs/performance.md"
+        named |= set(re.findall(rf'docs/{name}\.md, "([^"]+)"', text))
+    assert named, f"nothing names a section of docs/{name}.md"
     # a name is a heading or its start ("Borrowed views" for "Borrowed views: no reference counts ...")
     missing = sorted(n for n in named if not any(h.startswith(n) for h in headings))
-    assert not missing, f"named but missing in docs/performance.md: {missing}"
+    assert not missing, f"named but missing in docs/{name}.md: {missing}"
 
 
 @pytest.mark.parametrize(

@@ -278,7 +278,7 @@ def _work(sim, inputs, ground=False) -> np.ndarray:
 
 
 def test_newton_work_counts_the_jacobians_residuals_and_factorizations_of_each_step():
-    """``Simulator.newton_work`` follows Newton's structure step by step (docs/performance.md)."""
+    """``Simulator.newton_work`` follows Newton's structure step by step (docs/performance_history.md)."""
     rng = np.random.default_rng(3)
     inputs = rng.uniform(-3, 3, (60, 8))
     start = body_from_curvature(np.full(8, 0.2), Simulator(SimConfig()).lbar)
@@ -332,7 +332,7 @@ def test_a_residual_is_the_same_bits_with_or_without_its_jacobian(medium):
 
 
 def test_the_kernels_run_as_python_with_numba_disabled_and_agree_with_the_compiled_ones():
-    # NUMBA_DISABLE_JIT=1 is how the stepper's passes are traced (docs/performance.md); the
+    # NUMBA_DISABLE_JIT=1 is how the stepper's passes are traced (docs/performance_history.md); the
     # kernels' borrowed views (layout.borrowed, an intrinsic in compiled code) are the arrays there
     code = (
         "import numpy as np, gymnasium as gym, soft_snake_gym\n"

@@ -40,7 +40,7 @@ def _compile_display(params: str, body: str) -> Callable[..., dict[str, Any]]:
 
     ``info`` is built this way because a dict display with constant keys takes its values
     straight from the stack: about half the time of ``dict(zip(keys, values))`` and of building
-    it in parts (docs/performance.md, "The single env's info as one dict display"). The source
+    it in parts (docs/performance_history.md, "The single env's info as one dict display"). The source
     is made by :meth:`SoftRobotEnv._info_displays` from the layout's names and indices only.
     """
     return eval(f"lambda {params}: {{{body}}}", {})

@@ -598,7 +598,7 @@ def _step_units(active, s, t, status, first, end):
 
 CRAWL_MIN = 4 * lanes.LANES
 """The fewest active crawlers on a thread that :func:`_crawl` takes: its lanes pay from about 64
-(docs/performance.md, "Worms in lanes"); with fewer, the lanes idle while the last robots finish."""
+(docs/performance_history.md, "Worms in lanes"); with fewer, the lanes idle while the last robots finish."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -657,7 +657,7 @@ def _crawl(active, s, t, status, lo, hi, scratch):
 
 TAIL_MIN = 6
 """The fewest robots past the last full block that go as a block of their own, the rest of its lanes
-idle: from 6 robots such a block costs less than the robots one by one (docs/performance.md,
+idle: from 6 robots such a block costs less than the robots one by one (docs/performance_history.md,
 "The tail block")."""
 
 

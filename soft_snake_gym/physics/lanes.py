@@ -7,7 +7,7 @@ the whole block with each robot in one lane of the CPU's vector registers: the s
 banded factorization and the solves), its end (:func:`stage_end`: the powers, and the
 curvatures for the observation), then the energies (:func:`energies`). :func:`take` copies the
 robots into a :class:`Block` once a step and :func:`put` copies them back. LLVM vectorizes a
-loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/performance.md,
+loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/performance_history.md,
 "Sixteen eels per instruction"):
 
 - every array of the block is flat, element ``i`` of lane ``r`` at ``i * LANES + r`` (a band

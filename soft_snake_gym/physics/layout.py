@@ -241,7 +241,7 @@ def rows_of(arr, start, rows, cols):
 
     ``arr`` is 1-D and C-contiguous. In compiled code the view's struct is written at once:
     ``reshape`` calls numba's C helper that checks the new shape against the strides, a quarter
-    of a microsecond a robot step in the batched eel's views (docs/performance.md).
+    of a microsecond a robot step in the batched eel's views (docs/performance_history.md, "Borrowed views").
     """
     return arr[start : start + rows * cols].reshape(rows, cols)
 

@@ -67,7 +67,7 @@ def policy_kwargs(cfg: TrainConfig) -> dict[str, Any]:
 
     Adam runs fused (one kernel over all the parameters instead of about a dozen tensor
     operations each) unless ``optimizer_kwargs.fused`` is false: at the PPO settings of
-    ``SoftEel-v0`` the update is 1.14x faster and ``learn`` 1.07x (docs/performance.md, "Adam
+    ``SoftEel-v0`` the update is 1.14x faster and ``learn`` 1.07x (docs/performance_history.md, "Adam
     fused"). Its digits differ from the unfused Adam's in float32's last place.
     """
     import torch.nn as nn  # here, not above: torch takes seconds to import
@@ -167,7 +167,7 @@ def torch_for_learning() -> Iterator[None]:
     - ``torch.distributions`` without argument checks: each policy call builds a ``Normal`` and
       would check its mean and standard deviation (and ``log_prob`` its sample) for NaN and
       sign, which is 14 % of a rollout's policy call and 8 % of PPO's ``learn`` at the
-      ``SoftEel-v0`` settings (docs/performance.md, "Distributions unchecked"). A policy that
+      ``SoftEel-v0`` settings (docs/performance_history.md, "Distributions unchecked"). A policy that
       goes NaN is still stopped, with a message, by the env: a NaN action raises ``ValueError``.
     """
     import torch  # here, not above: torch takes seconds to import
