@@ -112,13 +112,15 @@ def _one_step_error(tol: float, states: int = 30) -> float:
 
 
 def main() -> None:
-    """Print the three parts for each tolerance."""
+    """Print the four parts for each tolerance."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--tolerances", type=float, nargs="+", default=[1e-6, 1e-5, 1e-4, 3e-4, 1e-3])
     p.add_argument("--robots", type=int, default=256)
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--seconds", type=float, default=1.5)
     args = p.parse_args()
+    if min(args.tolerances) <= 0 or args.robots < 1 or args.rounds < 1 or args.seconds <= 0:
+        p.error("--tolerances must be > 0, --robots and --rounds >= 1, --seconds > 0")
     tols = args.tolerances
     envs = {tol: _eels(args.robots, newton_tol=tol) for tol in tols}
     actions = np.random.default_rng(0).uniform(-1, 1, (32,) + envs[tols[0]].action_space.shape)
