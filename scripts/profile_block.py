@@ -82,7 +82,7 @@ def _cut(s, t, first, scratch, stop):
         return
     lanes.energies(x, p)
     for r in range(lanes.LANES):
-        lanes.put(s, first + r, x, r, x.v)
+        lanes.put_state(s, first + r, x, r)
     part += 1
     if part == stop:
         return

@@ -66,10 +66,19 @@ def _scalar_residuals(s, dt, jac, res):
 
 @njit
 def _taken(s, uk):
-    """The first LANES robots of ``s`` (inputs ``uk``) taken into a new block: (block, parameters)."""
+    """The first LANES robots of ``s`` (inputs ``uk``) taken into a new block: (block, parameters).
+
+    With the stage's start (``q0``, ``p0``, ``vstep``), which ``lanes.take`` leaves to
+    ``lanes.stage_start``: here the stages were started robot by robot.
+    """
     x = lanes.allocate(s.q.shape[1])
     p = np.empty((lanes.N_LANE_PRM, LANES))
     lanes.take(s, uk, 0, x, p)
+    for r in range(LANES):
+        for k in range(s.q.shape[1]):
+            x.q0[k * LANES + r] = s.buf[r, L.B_Q0, k]
+            x.p0[k * LANES + r] = s.buf[r, L.B_P0, k]
+            x.vstep[k * LANES + r] = s.buf[r, L.B_VSTEP, k]
     return x, p
 
 
@@ -331,9 +340,9 @@ def _blocks_against_robot_step(make, actions: np.ndarray, threads: int, any_nan:
 
 
 def _state(sim, task) -> list[np.ndarray]:
-    """Copies of a batch's arrays, all but Newton's scratch (band, trial, step)."""
+    """Copies of a batch's arrays, all but the stages' work (Newton's band, trial and step, ``lanes.STAGE_ROWS``)."""
     s = L.sim_arrays_over(sim.f.copy(), sim.ibuf)
-    kept_rows = [k for k in range(L.N_BUF) if k not in (L.B_VACC, L.B_DV)]
+    kept_rows = [k for k in range(L.N_BUF) if k not in (L.B_VACC, L.B_DV, *lanes.STAGE_ROWS)]
     return [
         np.array(a) for a in (s.q, s.v, s.kbar, s.lbar, s.prm, s.out, s.buf[:, kept_rows], task.f, task.obs)
     ]

@@ -539,8 +539,10 @@ def eligible(prm):
 def take(s, uk, first, x, p):
     """Copy robots ``first`` .. ``first + LANES - 1`` of stacked ``SimArrays`` ``s`` (inputs ``uk``) into block ``x``.
 
-    Their state (:class:`Block`) and, into ``p``, their parameters (``L_*`` rows). Lanes past the
-    last robot of ``s`` get the last robot again: their arithmetic stays that of a robot.
+    Their state at the start of a step (:class:`Block`) and, into ``p``, their parameters
+    (``L_*`` rows); not the stages' start ``q0``, ``p0`` and ``vstep``, which :func:`stage_start`
+    writes before anything reads them. Lanes past the last robot of ``s`` get the last robot
+    again: their arithmetic stays that of a robot.
     """
     n2 = s.q.shape[1]
     for r in range(LANES):
@@ -549,12 +551,9 @@ def take(s, uk, first, x, p):
         for k in range(n2):
             x.q[_ix(k, r)] = s.q[i, k]
             x.v[_ix(k, r)] = s.v[i, k]
-            x.q0[_ix(k, r)] = buf[B_Q0, k]
             x.v0[_ix(k, r)] = buf[B_V0, k]
-            x.vstep[_ix(k, r)] = buf[B_VSTEP, k]
             x.fext[_ix(k, r)] = buf[B_FEXT, k]
             x.m[_ix(k, r)] = buf[B_M, k]
-            x.p0[_ix(k, r)] = buf[B_P0, k]
         for k in range(s.kbar.shape[1]):
             x.kbar[_ix(k, r)] = s.kbar[i, k]
             x.uk[_ix(k, r)] = uk[i, k]
@@ -588,6 +587,34 @@ def put(s, i, x, r, v):
         buf[B_F, k] = x.F[_ix(k, r)]
         buf[B_R, k] = x.R[_ix(k, r)]
         buf[B_A, k] = x.A[_ix(k, r)]
+    for k in range(s.kbar.shape[1]):
+        s.kbar[i, k] = x.kbar[_ix(k, r)]
+    for k in range(n2 // 2 - 1):
+        buf[B_GEO, 2 * k] = x.E[_ix(4 * k, r)]
+        buf[B_GEO, 2 * k + 1] = x.E[_ix(4 * k + 1, r)]
+        buf[B_GEO + 1, 2 * k] = x.E[_ix(4 * k + 2, r)]
+        buf[B_GEO + 1, 2 * k + 1] = x.E[_ix(4 * k + 3, r)]
+
+
+STAGE_ROWS = (B_Q0, B_VSTEP, B_P0, B_F, B_R, B_A)
+"""``buf``'s rows that hold a stage's start and its residual's work: every integrator writes them
+before it reads them, so a step's end does not copy them back (:func:`put_state`)."""
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def put_state(s, i, x, r):
+    """Copy lane ``r``'s state at the end of a step back into robot ``i`` of ``s``: what a later step or the task reads.
+
+    ``q``, ``v``, ``kbar``, the step's start velocity ``buf[B_V0]`` (the next step's first guess
+    extrapolates from it) and the edges ``buf[B_GEO]`` (the observation's). ``buf``'s
+    :data:`STAGE_ROWS` stay as they were.
+    """
+    n2 = s.q.shape[1]
+    buf = s.buf[i]
+    for k in range(n2):
+        s.q[i, k] = x.q[_ix(k, r)]
+        s.v[i, k] = x.v[_ix(k, r)]
+        buf[B_V0, k] = x.v0[_ix(k, r)]
     for k in range(s.kbar.shape[1]):
         s.kbar[i, k] = x.kbar[_ix(k, r)]
     for k in range(n2 // 2 - 1):
