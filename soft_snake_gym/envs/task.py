@@ -762,8 +762,10 @@ def block_step(active, s, t, first, status, scratch):
     sub-steps written out: each robot's task start and end and the step's end are the same
     functions, the stages run in the block (``lanes.stage_start``, ``lanes.newton``,
     ``lanes.stage_end``) in the scalar kernels' order of operations, and the sums are
-    ``simulate``'s, so every robot ends bit for bit as :func:`robot_step` leaves it. A robot
-    whose step fails is put back at once; the others after their last stage. An inactive robot's
+    ``simulate``'s, so every robot ends bit for bit as :func:`robot_step` leaves it (all but
+    ``buf``'s ``lanes.STAGE_ROWS``, the stages' work, which no step reads before it writes them).
+    A robot whose step fails is put back whole at once (``lanes.put``); the others' state after
+    their last stage (``lanes.put_state``). An inactive robot's
     lane idles: the block computes it as it does a lane whose action is bad, and puts nothing of
     it back (:func:`batch_step` leaves that robot alone). So do the lanes past the last robot in
     the tail block, where ``lanes.take`` copies the last robot in again.
