@@ -82,7 +82,7 @@ def _cut(s, t, first, scratch, stop):
         return
     lanes.energies(x, p)
     for r in range(lanes.LANES):
-        lanes.put_state(s, first + r, x, r)
+        lanes.put_state(s, first + r, x, r, x.v)
     part += 1
     if part == stop:
         return

@@ -835,7 +835,7 @@ def block_step(active, s, t, first, status, scratch):
         si, ti = _robot(s, t, i)
         together = state[r] == L.OK  # else put back earlier: the block moved on
         if together:
-            lanes.put_state(s, i, x, r)
+            lanes.put_state(s, i, x, r, x.v)
         st = stepper.end_step(
             si, state[r], niter[r], resid[r], energy[0, r], energy[1, r], energy[2, r], energy[3, r]
         )

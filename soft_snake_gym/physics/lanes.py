@@ -567,53 +567,24 @@ def take(s, uk, first, x, p):
         p[L_TOL, r], p[L_MAXIT, r], p[L_CHORD, r] = prm[P_TOL], prm[P_MAXIT], prm[P_CHORD]
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def put(s, i, x, r, v):
-    """Copy lane ``r`` of block ``x`` back into robot ``i`` of ``s``, with the velocity from ``v`` (``x.v`` or ``x.guess``).
-
-    What :func:`take` copied in and the step changes: ``q``, ``v``, ``kbar``, and ``buf``'s rows
-    ``B_Q0``, ``B_V0``, ``B_VSTEP``, ``B_P0``, ``B_F``, ``B_R``, ``B_A`` and ``B_GEO``. A swimmer's
-    rest lengths and length rates do not move (:func:`stage_start`).
-    """
-    n2 = s.q.shape[1]
-    buf = s.buf[i]
-    for k in range(n2):
-        s.q[i, k] = x.q[_ix(k, r)]
-        s.v[i, k] = v[_ix(k, r)]
-        buf[B_Q0, k] = x.q0[_ix(k, r)]
-        buf[B_V0, k] = x.v0[_ix(k, r)]
-        buf[B_VSTEP, k] = x.vstep[_ix(k, r)]
-        buf[B_P0, k] = x.p0[_ix(k, r)]
-        buf[B_F, k] = x.F[_ix(k, r)]
-        buf[B_R, k] = x.R[_ix(k, r)]
-        buf[B_A, k] = x.A[_ix(k, r)]
-    for k in range(s.kbar.shape[1]):
-        s.kbar[i, k] = x.kbar[_ix(k, r)]
-    for k in range(n2 // 2 - 1):
-        buf[B_GEO, 2 * k] = x.E[_ix(4 * k, r)]
-        buf[B_GEO, 2 * k + 1] = x.E[_ix(4 * k + 1, r)]
-        buf[B_GEO + 1, 2 * k] = x.E[_ix(4 * k + 2, r)]
-        buf[B_GEO + 1, 2 * k + 1] = x.E[_ix(4 * k + 3, r)]
-
-
 STAGE_ROWS = (B_Q0, B_VSTEP, B_P0, B_F, B_R, B_A)
 """``buf``'s rows that hold a stage's start and its residual's work: every integrator writes them
 before it reads them, so a step's end does not copy them back (:func:`put_state`)."""
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def put_state(s, i, x, r):
-    """Copy lane ``r``'s state at the end of a step back into robot ``i`` of ``s``: what a later step or the task reads.
+def put_state(s, i, x, r, v):
+    """Copy lane ``r``'s state back into robot ``i`` of ``s``, with the velocity from ``v`` (``x.v`` or ``x.guess``).
 
-    ``q``, ``v``, ``kbar``, the step's start velocity ``buf[B_V0]`` (the next step's first guess
-    extrapolates from it) and the edges ``buf[B_GEO]`` (the observation's). ``buf``'s
-    :data:`STAGE_ROWS` stay as they were.
+    What a later step or the task reads: ``q``, ``v``, ``kbar``, the step's start velocity
+    ``buf[B_V0]`` (the next step's first guess extrapolates from it) and the edges ``buf[B_GEO]``
+    (the observation's); at a step's end, ``buf``'s :data:`STAGE_ROWS` stay as they were.
     """
     n2 = s.q.shape[1]
     buf = s.buf[i]
     for k in range(n2):
         s.q[i, k] = x.q[_ix(k, r)]
-        s.v[i, k] = x.v[_ix(k, r)]
+        s.v[i, k] = v[_ix(k, r)]
         buf[B_V0, k] = x.v0[_ix(k, r)]
     for k in range(s.kbar.shape[1]):
         s.kbar[i, k] = x.kbar[_ix(k, r)]
@@ -622,6 +593,24 @@ def put_state(s, i, x, r):
         buf[B_GEO, 2 * k + 1] = x.E[_ix(4 * k + 1, r)]
         buf[B_GEO + 1, 2 * k] = x.E[_ix(4 * k + 2, r)]
         buf[B_GEO + 1, 2 * k + 1] = x.E[_ix(4 * k + 3, r)]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def put(s, i, x, r, v):
+    """:func:`put_state` and the stages' work (``buf``'s :data:`STAGE_ROWS`): all that :func:`take` and a stage change.
+
+    For a lane that ``_be_newton`` solves on its robot's arrays, and a robot whose step fails. A
+    swimmer's rest lengths and length rates do not move (:func:`stage_start`).
+    """
+    put_state(s, i, x, r, v)
+    buf = s.buf[i]
+    for k in range(s.q.shape[1]):
+        buf[B_Q0, k] = x.q0[_ix(k, r)]
+        buf[B_VSTEP, k] = x.vstep[_ix(k, r)]
+        buf[B_P0, k] = x.p0[_ix(k, r)]
+        buf[B_F, k] = x.F[_ix(k, r)]
+        buf[B_R, k] = x.R[_ix(k, r)]
+        buf[B_A, k] = x.A[_ix(k, r)]
 
 
 @njit(cache=True, error_model="numpy")
