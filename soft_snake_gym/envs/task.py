@@ -700,9 +700,10 @@ def _block_scratch(n2):
 def _step_unit(active, s, t, status, u, scratch):
     """Unit ``u`` of :func:`_units`: a block (:func:`_step_block`) or one robot past the last block.
 
-    Inlined into :func:`_step_units`, as :func:`_step_block` is: called, the two cost about 0.7 µs
-    a block with no robot to step (16 calls 20 µs, inlined 1 µs: docs/performance.md, "Where
-    the time goes now"), and 256 eels stepped 1.05 times slower.
+    Inlined into :func:`_step_units`, as :func:`_step_block` is: called, they cost about 0.7 µs
+    a block before any robot stepped (16 calls of :func:`_step_block` 11.5 µs, the same choice
+    written inline 0.7 µs: docs/performance_history.md, "Blocks copy only what a step reads; the
+    block's choice inlined"), and 256 eels stepped 1.05 times slower.
     """
     blocks = _blocks(status.size)
     if u < blocks:
