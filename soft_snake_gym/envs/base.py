@@ -354,6 +354,35 @@ class SoftRobotEnv(gym.Env):
             The first observation (see the class docstring's Observation Space) and ``info``
             with the state entries, ``randomized`` (the drawn physics) and ``failure`` (None).
         """
+        self.start_episode(seed, options)
+        info = self.reset_info()
+        if self.render_mode == "human":
+            self.render()
+        return self.task.obs.copy(), info
+
+    def reset_info(self) -> dict[str, Any]:
+        """The info :meth:`reset` returns, of the episode just started.
+
+        Also records the state that ``step`` reports if the next step fails (``rs`` and ``out`` as
+        lists, the body's entries).
+        """
+        self._last_state = state = (
+            self.task.rs.tolist(),
+            self._out.tolist(),
+            self._copy_shape(self._own_views),
+        )
+        info = self._own_state_of(*state, self._h)
+        info["randomized"] = dict(self.randomized)
+        info["failure"] = None
+        return info
+
+    def start_episode(self, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
+        """:meth:`reset` without its observation and info: the body, the task and the draws.
+
+        What the vector env's autoreset calls for a robot (a reset's info costs a third of the
+        reset): it reads the observation from the batch and ``randomized`` (the drawn physics) from
+        here, and never steps a robot through this object, which needs :meth:`reset_info`'s state.
+        """
         super().reset(seed=seed)
         s = self.settings
         options = dict(options or {})
@@ -389,18 +418,6 @@ class SoftRobotEnv(gym.Env):
         self._trail_com.clear()
         self._trail_head.clear()
         self._record_trail()
-        # the state ``step`` reports if the next step fails: ``rs`` and ``out`` as lists, the body's entries
-        self._last_state = state = (
-            self.task.rs.tolist(),
-            self._out.tolist(),
-            self._copy_shape(self._own_views),
-        )
-        info = self._own_state_of(*state, self._h)
-        info["randomized"] = dict(self.randomized)
-        info["failure"] = None
-        if self.render_mode == "human":
-            self.render()
-        return self.task.obs.copy(), info
 
     def step(self, action):
         """Hold ``action`` for one control step of ``dt`` seconds and advance the physics.

@@ -195,8 +195,8 @@ class _NavEnv(SwimEnv):
         tp[T.T_NPATH] = self.n_path
         self._options: dict[str, Any] = {}
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """Start an episode, as :meth:`SwimEnv.reset`, with this task's own options (class docstring)."""
+    def start_episode(self, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
+        """Start an episode, as :meth:`SwimEnv.start_episode`, with this task's own options (class docstring)."""
         options = dict(options or {})
         self._options = {k: options.pop(k) for k in self.task_options if k in options}
         if "goal_direction" in options:
@@ -204,7 +204,7 @@ class _NavEnv(SwimEnv):
                 f"{self.env_id}: reset option goal_direction is not used: the task sets the goal "
                 f"direction; options of this task: {', '.join(self.task_options)}"
             )
-        return super().reset(seed=seed, options=options)
+        super().start_episode(seed, options)
 
 
 class GoalEnv(_NavEnv):

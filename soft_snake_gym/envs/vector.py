@@ -90,16 +90,21 @@ def _start_step(actions, act, stepping, out, shape, prev, prev_shape, status):
     n, k = act.shape
     bad = -1
     for i in range(n):
-        for j in range(k):
-            act[i, j] = actions[i, j]
-            if bad < 0 and stepping[i] and not math.isfinite(act[i, j]):
-                bad = i
+        finite = True
+        for j in range(k):  # copy and check in one pass, without a branch per entry
+            a = actions[i, j]
+            act[i, j] = a
+            finite &= math.isfinite(a)
+        if not finite and stepping[i] and bad < 0:
+            bad = i
     if bad >= 0:
         return bad
+    m = shape.shape[1]
     for i in range(n):
         prev[i, 0] = out[i, O_NSTEPS]
         prev[i, 1] = out[i, O_NITER]
-        prev_shape[i, :] = shape[i]
+        for j in range(m):
+            prev_shape[i, j] = shape[i, j]
         status[i] = OK
     return -1
 
@@ -167,16 +172,14 @@ def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, reset, h):
     were ``stepped`` or ``reset``, any was ``reset``, and how many ``failed``.
     """
     n, k = rs.shape
-    rows = np.empty((k, n))
+    m = shape.shape[1]
     time_s = np.empty(n)
     niter = np.empty(n, dtype=np.int64)
-    shape_out = np.empty_like(shape)
+    shape_out = np.empty((n, m))
     failed = np.zeros(n, dtype=np.bool_)
-    ledger = np.zeros((N_LEDGER, n))
     all_stepped = all_present = True
     any_stepped = any_reset = False
     n_failed = 0
-    m = shape.shape[1]
     for i in range(n):
         all_stepped &= stepped[i]
         any_stepped |= stepped[i]
@@ -185,26 +188,29 @@ def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, reset, h):
         failed[i] = stepped[i] and status[i] != OK
         n_failed += failed[i]
         if failed[i]:
-            steps, it, src = prev[i, 0], prev[i, 1], prev_shape
+            time_s[i] = prev[i, 0] * h[i]
+            niter[i] = int(prev[i, 1])
+            for j in range(m):
+                shape_out[i, j] = prev_shape[i, j]
         else:
-            steps, it, src = out[i, O_NSTEPS], out[i, O_NITER], shape
-        time_s[i] = steps * h[i]
-        niter[i] = int(it)
-        for j in range(m):
-            shape_out[i, j] = src[i, j]
+            time_s[i] = out[i, O_NSTEPS] * h[i]
+            niter[i] = int(out[i, O_NITER])
+            for j in range(m):
+                shape_out[i, j] = shape[i, j]
+    rows = np.empty((k, n))
     for r in range(k):  # row by row: the writes run along a row (2 KB apart robot by robot)
         for i in range(n):
             rows[r, i] = rs[i, r]
+    terms = rows
+    if not all_stepped:  # written in one pass, not copied and then zeroed robot by robot
+        terms = np.empty((k, n))
+        for r in range(k):
+            for i in range(n):
+                terms[r, i] = rows[r, i] if r < T.R_FWD or stepped[i] else 0.0
+    ledger = np.empty((N_LEDGER, n))
     for r in range(N_LEDGER):
         for i in range(n):
-            if stepped[i]:
-                ledger[r, i] = out[i, O_LEDGER + r]
-    terms = rows
-    if not all_stepped:
-        terms = rows.copy()
-        for i in range(n):
-            if not stepped[i]:
-                terms[T.R_FWD :, i] = 0.0
+            ledger[r, i] = out[i, O_LEDGER + r] if stepped[i] else 0.0
     flags = (any_stepped, all_present, any_reset, n_failed)
     return rows, terms, time_s, niter, shape_out, failed, ledger, flags
 
@@ -388,8 +394,9 @@ class SoftVectorEnv(VectorEnv):
                 raise ValueError(
                     f"seed has {len(seeds)} entries for {self.num_envs} robots; give one per robot or one int"
                 )
-        reset_infos = self.reset_robots(seeds, [options] * self.num_envs)
-        return self.obs.copy(), self.infos(np.zeros(self.num_envs, dtype=np.bool_), self._all, reset_infos)
+        infos = self.reset_robots(seeds, [options] * self.num_envs)
+        randomized = [info["randomized"] for info in infos]
+        return self.obs.copy(), self.infos(np.zeros(self.num_envs, dtype=np.bool_), self._all, randomized)
 
     def step(self, actions):
         """Step every robot (in ``NEXT_STEP`` mode, reset those whose episode ended last step)."""
@@ -411,8 +418,8 @@ class SoftVectorEnv(VectorEnv):
             infos["final_obs"], infos["_final_obs"] = final_obs, dones.copy()
             infos["final_info"], infos["_final_info"] = self.infos(dones, none, []), dones.copy()
             resetting, stepping = dones, ~dones
-        reset_infos = [self.reset_robot(i) for i in np.flatnonzero(resetting)]
-        infos.update(self.infos(stepping, resetting, reset_infos))
+        randomized = [self.reset_robot(i) for i in np.flatnonzero(resetting)]
+        infos.update(self.infos(stepping, resetting, randomized))
         if stats is not None:
             infos["episode"], infos["_episode"] = stats, dones.copy()
         self._autoreset = none if same_step else dones
@@ -507,25 +514,29 @@ class SoftVectorEnv(VectorEnv):
         return terminated, truncated
 
     def reset_robot(self, i: int, seed: int | None = None, options: dict[str, Any] | None = None) -> dict:
-        """Reset robot ``i`` through its env object and start its episode counters.
+        """Start robot ``i``'s episode through its env object and its episode counters.
 
-        Returns that env's reset info.
+        The env object's ``start_episode``: its ``reset`` without the info, which the batch's
+        :meth:`infos` builds. Returns the episode's ``randomized`` draws (empty without
+        ``randomize``).
         """
-        _, info = self.envs[i].reset(seed=seed, options=options)
+        env = self.envs[i]
+        env.start_episode(seed, options)
         self._elapsed[i] = 0
         self._returns[i] = 0.0
         self._starts[i] = time.perf_counter()
-        return info
+        return env.randomized
 
     def reset_robots(self, seeds: list[int | None], options: list[dict[str, Any] | None]) -> list[dict]:
         """Reset every robot, robot ``i`` with ``seeds[i]`` and ``options[i]``; clears pending autoresets.
 
-        Returns the robots' reset infos.
+        Returns the robots' reset infos, each as its single env's ``reset`` returns it.
         """
-        infos = [self.reset_robot(i, seeds[i], options[i]) for i in range(self.num_envs)]
+        for i in range(self.num_envs):
+            self.reset_robot(i, seeds[i], options[i])
         self._autoreset[:] = False
         self._needs_reset = False
-        return infos
+        return [env.reset_info() for env in self.envs]
 
     def episode_metrics(self, i: int) -> dict[str, float]:
         """Robot ``i``'s running episode metrics, as its env's ``info["metrics"]``."""
@@ -539,11 +550,12 @@ class SoftVectorEnv(VectorEnv):
         r, l, t = _episode_stats(dones, self._returns, self._elapsed, self._starts, time.perf_counter())
         return {"r": r, "l": l, "t": t}
 
-    def infos(self, stepped: np.ndarray, reset: np.ndarray, reset_infos: list[dict]) -> dict[str, Any]:
+    def infos(self, stepped: np.ndarray, reset: np.ndarray, randomized: list[dict]) -> dict[str, Any]:
         """Infos of robots that ``stepped`` and were ``reset``, with Gymnasium's ``_key`` masks.
 
-        ``reset_infos`` are in robot order. As ``SyncVectorEnv`` would gather the single envs' (the
-        entries are built by the same env methods).
+        ``randomized`` holds the reset robots' draws (:meth:`reset_robot`), in robot order. As
+        ``SyncVectorEnv`` would gather the single envs' (the entries are built by the same env
+        methods).
         """
         n = self.num_envs
         rows, terms, time_s, niter, shape, failed, ledger, flags = _info_rows(
@@ -568,7 +580,7 @@ class SoftVectorEnv(VectorEnv):
             rows[:, hidden] = 0
             for value in (time_s, niter, *shape.values()):
                 value[hidden] = 0
-        failure = np.full(n, None, dtype=object)
+        failure = np.empty(n, dtype=object)  # None throughout
         if n_failed:
             for i in np.flatnonzero(failed):
                 failure[i] = STATUS_REASONS[self._status[i]]
@@ -576,15 +588,15 @@ class SoftVectorEnv(VectorEnv):
         if any_stepped:
             infos.update(self._rest_of(terms, ledger, stepped.copy()))
         if any_reset:
-            randomized: dict[str, Any] = {}
-            for i, info in zip(np.flatnonzero(reset), reset_infos, strict=True):
-                for key, value in info["randomized"].items():
-                    if key not in randomized:
-                        randomized[key] = np.zeros(n)
-                        randomized[f"_{key}"] = np.zeros(n, dtype=np.bool_)
-                    randomized[key][i] = value
-                    randomized[f"_{key}"][i] = True
-            infos["randomized"], infos["_randomized"] = randomized, reset.copy()
+            drawn: dict[str, Any] = {}
+            for i, draws in zip(np.flatnonzero(reset), randomized, strict=True):
+                for key, value in draws.items():
+                    if key not in drawn:
+                        drawn[key] = np.zeros(n)
+                        drawn[f"_{key}"] = np.zeros(n, dtype=np.bool_)
+                    drawn[key][i] = value
+                    drawn[f"_{key}"][i] = True
+            infos["randomized"], infos["_randomized"] = drawn, reset.copy()
         return infos
 
 
