@@ -471,7 +471,7 @@ def run_benchmark(
     res: dict[str, Any] = {
         "machine": {
             "platform": platform.platform(),
-            "processor": platform.processor(),
+            "processor": _processor(),
             "cpus": os.cpu_count(),
             "numba_threads": all_threads,
             "threading_layer": _threading_layer(),
@@ -523,6 +523,22 @@ def _compute(res: dict[str, Any]) -> list[dict[str, Any]]:
             }
         )
     return out
+
+
+def _processor() -> str:
+    """The CPU's model name (Linux's /proc/cpuinfo; elsewhere what ``platform`` knows).
+
+    Runs on different machines differ by more than most changes to the code, so every result
+    names its machine.
+    """
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor()
 
 
 def _threading_layer() -> str:
@@ -630,7 +646,8 @@ def _compute_lines(res: dict[str, Any]) -> list[str]:
 def format_report(res: dict[str, Any]) -> str:
     """The results as plain-text tables with the ratios and the targets."""
     lines = [
-        f"machine: {res['machine']['platform']}, {res['machine']['cpus']} CPUs, numba threads "
+        f"machine: {res['machine']['platform']}, {res['machine'].get('processor') or 'CPU not named'}, "
+        f"{res['machine']['cpus']} CPUs, numba threads "
         f"{res['machine']['numba_threads']} ({res['machine']['threading_layer']})"
     ]
     for lib, rows in (("mujoco", "Swimmer-v5"), ("envpool", "EnvPool Swimmer-v4")):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import statistics
 import sys
+from pathlib import Path
 
 import pytest
 from support import cli
@@ -68,6 +69,12 @@ def test_benchmark_cli_writes_json_and_png(tmp_path, capsys):
         assert abs(row["fraction_of_peak"] - steps * flops / 1e9 / res["peak"]["gflops"]["1"]) < 1e-12
     text = capsys.readouterr().out
     assert "targets (ratios measured in this run" in text and str(out) in text
+    cpuinfo = Path("/proc/cpuinfo")
+    models = cpuinfo.read_text().splitlines() if cpuinfo.exists() else []
+    models = [line.split(":", 1)[1].strip() for line in models if line.startswith("model name")]
+    if models:  # the run names its CPU, as Linux does
+        assert res["machine"]["processor"] == models[0]
+        assert models[0] in text.splitlines()[0]
     assert "floating-point work against the machine's peak" in text
     if res["mujoco"] == "installed":
         assert "Swimmer-v5 gym.make" in cases
