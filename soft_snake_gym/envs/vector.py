@@ -175,7 +175,7 @@ def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, reset, h):
     m = shape.shape[1]
     time_s = np.empty(n)
     niter = np.empty(n, dtype=np.int64)
-    shape_out = np.empty((n, m))
+    shape_out = np.empty_like(shape)
     failed = np.zeros(n, dtype=np.bool_)
     all_stepped = all_present = True
     any_stepped = any_reset = False
@@ -188,15 +188,13 @@ def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, reset, h):
         failed[i] = stepped[i] and status[i] != OK
         n_failed += failed[i]
         if failed[i]:
-            time_s[i] = prev[i, 0] * h[i]
-            niter[i] = int(prev[i, 1])
-            for j in range(m):
-                shape_out[i, j] = prev_shape[i, j]
+            steps, it, src = prev[i, 0], prev[i, 1], prev_shape
         else:
-            time_s[i] = out[i, O_NSTEPS] * h[i]
-            niter[i] = int(out[i, O_NITER])
-            for j in range(m):
-                shape_out[i, j] = shape[i, j]
+            steps, it, src = out[i, O_NSTEPS], out[i, O_NITER], shape
+        time_s[i] = steps * h[i]
+        niter[i] = int(it)
+        for j in range(m):
+            shape_out[i, j] = src[i, j]
     rows = np.empty((k, n))
     for r in range(k):  # row by row: the writes run along a row (2 KB apart robot by robot)
         for i in range(n):
