@@ -195,3 +195,34 @@ def test_the_constant_length_loops_are_bit_for_bit_the_general_ones(n):
         _reference_solve(J_ref, piv_ref, n, x_ref)
         assert np.array_equal(x, x_ref)
     assert 0 < exchanged < 40  # both paths were taken
+
+
+@pytest.mark.parametrize("below", ["random", "zeros", "tie", "inf", "nan"])
+def test_the_pivot_test_as_a_maximum_decides_as_the_search_does(below):
+    # where the band is whole, band_factor tests the diagonal against the largest entry below it
+    # with a branch-free maximum and searches for the row only if the test fails; at the test's
+    # edge (exactly the threshold, one ulp either side), with ties, zeros, an infinity or a NaN
+    # below the diagonal, it must keep or exchange exactly as the search would
+    rng = np.random.default_rng(7)
+    n = 12
+    column = {
+        "random": rng.standard_normal(KL),
+        "zeros": np.zeros(KL),
+        "tie": np.array([2.0, -3.0, 3.0, 1.0, -3.0]),
+        "inf": np.array([1.0, np.inf, 2.0, 0.0, 1.0]),
+        "nan": np.array([1.0, np.nan, 2.0, 0.0, 4.0]),
+    }[below]
+    largest = np.nanmax(np.abs(column))
+    edge = PIVOT_THRESHOLD * largest if largest > 0 else 1.0
+    for diagonal in (edge, np.nextafter(edge, 0.0), np.nextafter(edge, np.inf), 0.0, -edge):
+        A = _random_band(rng, n) + np.diag(np.full(n, 8.0))
+        A[0, 0] = diagonal
+        A[1 : KL + 1, 0] = column
+        J, J_ref = _band_of(A), _band_of(A)
+        piv, piv_ref = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ok = band_factor(J, piv, n, PIVOT_THRESHOLD)
+            _reference_factor(J_ref, piv_ref, n, PIVOT_THRESHOLD)
+        assert ok == (diagonal != 0.0 or largest > 0)  # (the reference goes on past a zero column)
+        if ok:
+            assert J.tobytes() == J_ref.tobytes() and np.array_equal(piv, piv_ref), diagonal

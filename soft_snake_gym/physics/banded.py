@@ -39,6 +39,26 @@ def _factor(J, piv, n, threshold):
     """LU of the band in ``J`` in place, exchanging rows where the diagonal is below ``threshold`` of its column's largest entry."""
     reach = 0  # the last column a row exchange has filled in
     for k in range(n):
+        if reach <= k + KU and k + KL < n and k + KU < n:
+            # the band is whole and no exchange reaches past it: the pivot's test as a maximum
+            # without branches (the same one as the search's below, which then picks the row),
+            # and KL rows of KU entries each, loops of constant length that the compiler unrolls
+            # (the same operations in the same order)
+            diag = abs(J[k, KL])
+            best = diag
+            for d in range(1, KL + 1):
+                best = max(best, abs(J[k + d, KL - d]))
+            if diag >= threshold * best and best > 0.0:
+                piv[k] = k
+                inv = 1.0 / J[k, KL]
+                J[k, KL] = inv
+                for d in range(1, KL + 1):
+                    f = J[k + d, KL - d] * inv
+                    J[k + d, KL - d] = f
+                    if f != 0.0:
+                        for e in range(1, KU + 1):
+                            J[k + d, KL - d + e] -= f * J[k, KL + e]
+                continue
         diag = abs(J[k, KL])
         p = k
         best = diag
@@ -56,18 +76,6 @@ def _factor(J, piv, n, threshold):
             return False
         if p != k:
             reach = max(reach, p + KU)
-        if reach <= k + KU and k + KL < n and k + KU < n:
-            # no exchange reaches past this column's band: KL rows of KU entries each, loops
-            # of constant length that the compiler unrolls (the same operations in the same order)
-            inv = 1.0 / J[k, KL]
-            J[k, KL] = inv
-            for d in range(1, KL + 1):
-                f = J[k + d, KL - d] * inv
-                J[k + d, KL - d] = f
-                if f != 0.0:
-                    for e in range(1, KU + 1):
-                        J[k + d, KL - d + e] -= f * J[k, KL + e]
-            continue
         jmax = min(n - 1, max(k + KU, reach))
         if p != k:
             for j in range(k, jmax + 1):
