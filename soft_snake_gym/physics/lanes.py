@@ -15,6 +15,11 @@ loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/
   constants, so that LLVM can tell the stores of one lane's straight-line code apart;
 - a lane loop runs ``LANES`` = 16 iterations, the least that LLVM's loop vectorizer takes on
   (on AVX-512 two registers of eight doubles);
+- a loop that does the same to every element of its arrays runs over the flat index, not over
+  elements and lanes: LLVM unrolls a lane loop with a small body whole before its loop
+  vectorizer runs, and the unrolled code stays scalar (the SLP vectorizer cannot tell the
+  arrays apart), where a flat loop becomes vector code behind a runtime test that they do not
+  overlap;
 - indices are unsigned (no negative-index test per access), and a flag that chooses between
   paths (``jac``) is a constant in each compiled body, or the loop runs both paths masked;
 - no branch per lane and no store that some lanes make and others skip (LLVM makes it a masked
@@ -276,13 +281,11 @@ def _turning_rate(v, j, r, g0x, g0y, g1x, g1y, g2x, g2y):
 def _start_residual(x, dt):
     """``_be_residual``'s start for every lane: ``q = q0 + dt v``, ``F = fext``, ``A = v - v0``, the edges of ``q`` in ``E``."""
     q, v, q0, v0, fext, F, A, E = x.q, x.v, x.q0, x.v0, x.fext, x.F, x.A, x.E
-    n2 = q.size // LANES
-    for i in range(n2):
-        for r in range(LANES):
-            q[_ix(i, r)] = q0[_ix(i, r)] + dt * v[_ix(i, r)]
-            F[_ix(i, r)] = fext[_ix(i, r)]
-            A[_ix(i, r)] = v[_ix(i, r)] - v0[_ix(i, r)]
-    _edge_geometry(q, E, n2)  # as assemble: each edge's square root and divisions once per state
+    for k in range(q.size):  # element by element, flat (module docstring)
+        q[k] = q0[k] + dt * v[k]
+        F[k] = fext[k]
+        A[k] = v[k] - v0[k]
+    _edge_geometry(q, E, q.size // LANES)  # as assemble: each edge's square root and divisions once per state
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -409,9 +412,8 @@ def _residual(x, p, dt, jac, res):
                 _add_block(J, r, i, i + 1, c00 + d00, c01 + d01, c01 + d10, c11 + d11)
                 _add_block(J, r, i + 1, i, c00 - d00, c01 - d01, c01 - d10, c11 - d11)
                 _add_block(J, r, i + 1, i + 1, c00 + d00, c01 + d01, c01 + d10, c11 + d11)
-    for i in range(n2):
-        for r in range(LANES):
-            R[_ix(i, r)] = m[_ix(i, r)] * A[_ix(i, r)] - dt * F[_ix(i, r)]
+    for k in range(R.size):
+        R[k] = m[k] * A[k] - dt * F[k]
     if jac:
         for i in range(n2):
             for r in range(LANES):
@@ -625,34 +627,29 @@ def stage_start(x, p, stage, dt):
     q, v, q0, v0, p0, A, E, vstep = x.q, x.v, x.q0, x.v0, x.p0, x.A, x.E, x.vstep
     n2 = q.size // LANES
     stage_dt = (stepper.GAMMA if stage == 0 else 1.0 - stepper.GAMMA) * dt
-    for j in range(n2 // 2 - 2):
-        for r in range(LANES):
-            x.kbar[_ix(j, r)] += stage_dt * x.uk[_ix(j, r)]
+    for k in range(x.kbar.size):
+        x.kbar[k] += stage_dt * x.uk[k]
     if stage == 0:
-        for i in range(n2):
-            for r in range(LANES):
-                q0[_ix(i, r)] = q[_ix(i, r)]
-                v_prev = v0[_ix(i, r)]
-                v0[_ix(i, r)] = v[_ix(i, r)]
-                v[_ix(i, r)] += stepper.GAMMA * (v[_ix(i, r)] - v_prev)
-                p0[_ix(i, r)] = 0.0
+        for k in range(q.size):
+            q0[k] = q[k]
+            v_prev = v0[k]
+            v0[k] = v[k]
+            v[k] += stepper.GAMMA * (v[k] - v_prev)
+            p0[k] = 0.0
         _edge_geometry(q0, E, n2)
         _momentum(E, v0, p, p0, n2)
         return
     c = (1.0 - stepper.GAMMA) / stepper.GAMMA
-    for i in range(n2):
-        for r in range(LANES):
-            A[_ix(i, r)] = 0.0
+    A[:] = 0.0
     _edge_geometry(q, E, n2)
     _momentum(E, v, p, A, n2)
-    for i in range(n2):
-        for r in range(LANES):
-            p0[_ix(i, r)] += c * (A[_ix(i, r)] - p0[_ix(i, r)])
-            vstep[_ix(i, r)] = v0[_ix(i, r)]
-            change = v[_ix(i, r)] - v0[_ix(i, r)]
-            q0[_ix(i, r)] += c * (q[_ix(i, r)] - q0[_ix(i, r)])
-            v0[_ix(i, r)] += c * change
-            v[_ix(i, r)] = v0[_ix(i, r)] + change
+    for k in range(q.size):
+        p0[k] += c * (A[k] - p0[k])
+        vstep[k] = v0[k]
+        change = v[k] - v0[k]
+        q0[k] += c * (q[k] - q0[k])
+        v0[k] += c * change
+        v[k] = v0[k] + change
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -677,9 +674,7 @@ def stage_end(x, p, stage):
     n2 = q.size // LANES
     N = n2 // 2
     if stage == 1:
-        for i in range(n2):
-            for r in range(LANES):
-                x.v0[_ix(i, r)] = x.vstep[_ix(i, r)]
+        x.v0[:] = x.vstep
     _edge_geometry(q, E, n2)
     for r in range(LANES):
         power[0, r] = 0.0
@@ -776,17 +771,21 @@ def _any_going(on, done):
 def _full_step(x, n2):
     """``_be_newton``'s update at full length for the lanes :func:`_going`: ``v = vacc + 1 dv``.
 
-    ``vacc`` = v, ``dv`` = -R solved with the factors in J; the other lanes keep their ``v``.
+    ``vacc`` = v, ``dv`` = -R solved with the factors in J; the other lanes keep their ``v``:
+    every lane is updated in one flat loop (module docstring), then theirs is copied back from
+    ``vacc``.
     """
     v, R, J, vacc, dv, on, done = x.v, x.R, x.J, x.vacc, x.dv, x.on, x.done
     for k in range(n2 * LANES):
         vacc[k] = v[k]
         dv[k] = -R[k]
     solve(J, dv, n2)
-    for k in range(n2):
-        for r in range(LANES):
-            if _going(on, done, r):
-                v[_ix(k, r)] = vacc[_ix(k, r)] + 1.0 * dv[_ix(k, r)]
+    for k in range(n2 * LANES):
+        v[k] = vacc[k] + 1.0 * dv[k]
+    for r in range(LANES):
+        if not _going(on, done, r):
+            for k in range(n2):
+                v[_ix(k, r)] = vacc[_ix(k, r)]
 
 
 @njit(cache=True, error_model="numpy")
@@ -900,9 +899,10 @@ def ground_residual(x, p, dt, res):
     _start_residual(x, dt)
     J[:] = 0.0
     _elastic(x, p, cx, cv, True)
+    for k in range(R.size):
+        R[k] = m[k] * A[k] - dt * F[k]
     for i in range(n2):
         for r in range(LANES):
-            R[_ix(i, r)] = m[_ix(i, r)] * A[_ix(i, r)] - dt * F[_ix(i, r)]
             J[_jx(i, KL, r)] += m[_ix(i, r)]
     for r in range(LANES):
         res[L_PFRIC, r] = 0.0
