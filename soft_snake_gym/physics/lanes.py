@@ -17,9 +17,8 @@ loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/
   (on AVX-512 two registers of eight doubles);
 - a loop that does the same to every element of its arrays runs over the flat index, not over
   elements and lanes: LLVM unrolls a lane loop with a small body whole before its loop
-  vectorizer runs, and the unrolled code stays scalar (the SLP vectorizer cannot tell the
-  arrays apart), where a flat loop becomes vector code behind a runtime test that they do not
-  overlap;
+  vectorizer runs, and the unrolled code stays scalar (numba runs no SLP vectorizer), where a
+  flat loop becomes vector code behind a runtime test that the arrays do not overlap;
 - indices are unsigned (no negative-index test per access), and a flag that chooses between
   paths (``jac``) is a constant in each compiled body, or the loop runs both paths masked;
 - no branch per lane and no store that some lanes make and others skip (LLVM makes it a masked
