@@ -505,7 +505,10 @@ def solve(J, b, n):
                 else:
                     for i in range(k + 1, n):
                         b[_ix(i, r)] -= J[_jx(i, k - i + KL, r)] * bk
-    for k in range(n - 1, -1, -1):
+    for kk in range(n):  # k from n - 1 down
+        k = n - 1 - kk
+        if k < 0:  # never: it tells LLVM that k is not negative, which it needs to vectorize the lanes
+            break
         whole = k + KU < n
         for r in range(LANES):
             s = b[_ix(k, r)]
