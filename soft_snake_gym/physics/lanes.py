@@ -21,6 +21,10 @@ loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/
   flat loop becomes vector code behind a runtime test that the arrays do not overlap;
 - indices are unsigned (no negative-index test per access), and a flag that chooses between
   paths (``jac``) is a constant in each compiled body, or the loop runs both paths masked;
+- inside a lane loop, a loop runs a constant count (a variable count keeps the lane loop
+  scalar: :func:`factor` and :func:`solve` write out the band's last rows), and an index that
+  LLVM cannot prove non-negative, such as a row counted down, is tested (``if k < 0``) before
+  the lane loop, or the loop stays scalar;
 - no branch per lane and no store that some lanes make and others skip (LLVM makes it a masked
   store, slow on AMD's cores): each lane computes what every lane does and picks its values.
 
@@ -113,6 +117,10 @@ LANES = 16
 BAND = KL + KU + 1
 """Entries of a band row in a block: ``banded.WIDTH`` less the room for row exchanges' fill-in, which
 the block's factorization never makes (a lane that would exchange rows is solved elsewhere)."""
+if KL != 5 or KU != KL:
+    raise ImportError(
+        "lanes.factor and lanes.solve write out the band's last five columns: update them for KL, KU"
+    )
 
 # per-lane parameters, rows of the block's (N_LANE_PRM, LANES) array
 L_EA, L_EI, L_D, L_DB, L_CT, L_CN, L_CM, L_TOL, L_MAXIT, L_CHORD, L_MUD, L_G, L_EPS2 = range(13)
@@ -438,87 +446,101 @@ def _residual(x, p, dt, jac, res):
             res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) * (1.0 / m[_ix(i, r)]))  # as _be_residual's B_MINV
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _column(J, kept, k, below):
+    """``band_factor``'s column ``k`` in every lane, ``below`` rows under its pivot (a constant: see :func:`factor`)."""
+    if k < 0:  # a band of fewer than KL rows; it also tells LLVM that k is not negative
+        return
+    for r in range(LANES):  # band_factor's test: the diagonal >= threshold x the largest below
+        diag = abs(J[_jx(k, KL, r)])
+        best = diag
+        for e in range(1, below + 1):
+            best = max(best, abs(J[_jx(k + e, KL - e, r)]))
+        kept[r] = kept[r] & (diag >= PIVOT_THRESHOLD * best) & (best > 0.0)
+    for r in range(LANES):
+        inv = 1.0 / J[_jx(k, KL, r)]  # the factors hold the pivot's reciprocal, as band_factor's
+        J[_jx(k, KL, r)] = inv
+        for e in range(1, below + 1):
+            f = J[_jx(k + e, KL - e, r)] * inv
+            J[_jx(k + e, KL - e, r)] = f
+            for c in range(1, below + 1):
+                J[_jx(k + e, KL - e + c, r)] -= f * J[_jx(k, KL + c, r)]
+
+
 @njit(cache=True, error_model="numpy")
 def factor(J, kept, n):
     """``band_factor`` of every lane's band in place, where it keeps every diagonal pivot.
 
     ``kept[r]`` becomes False where ``band_factor`` would exchange rows (or find the band
-    singular); that lane's factors are then not ``band_factor``'s. Where the band is whole
-    (``k + KL < n``, ``k + KU < n``) each lane's column is straight-line code, as in
-    ``band_factor``'s own loops of constant length, and the lane loops are vector code: the
-    pivot test without short-circuits, the row updates without ``band_factor``'s skip of zero
-    multipliers, whose branch kept the loop scalar. The skip changes no bit of a finite band:
-    the bands (:func:`residual`, :func:`ground_residual`) start at +0 and only add or set +0, an
-    update ``x - f u`` gives -0 only from ``x`` = -0, so no entry an update reads is -0, and
-    ``x - (±0) u`` is ``x`` for every other ``x`` and finite ``u``. Where a lane's band holds an
-    infinity or a NaN its factors may differ from ``band_factor``'s; its residual is not finite
-    then either, where ``_be_newton`` uses no factors (a swimmer's lane is solved on its robot,
-    a worm's job gives up as ``_be_newton`` does).
+    singular); that lane's factors are then not ``band_factor``'s. Each column is
+    :func:`_column` with a constant count of rows below its pivot, ``KL`` where the band is
+    whole and ``KL - 1`` down to 0 in the last ``KL`` columns, written out, so that each lane's
+    column is straight-line code and the lane loops are vector code (with the count a variable,
+    the last five columns took as long as the other fifteen). The pivot test runs without
+    short-circuits and the row updates without ``band_factor``'s skip of zero multipliers, whose
+    branch kept the loops scalar. The skip changes no bit of a finite band: the bands
+    (:func:`residual`, :func:`ground_residual`) start at +0 and only add or set +0, an update
+    ``x - f u`` gives -0 only from ``x`` = -0, so no entry an update reads is -0, and ``x - (±0)
+    u`` is ``x`` for every other ``x`` and finite ``u``. Where a lane's band holds an infinity or a
+    NaN its factors may differ from ``band_factor``'s; its residual is not finite then either,
+    where ``_be_newton`` uses no factors (a swimmer's lane is solved on its robot, a worm's job
+    gives up as ``_be_newton`` does).
     """
     for r in range(LANES):
         kept[r] = True
-    for k in range(n):
-        if k + KL < n and k + KU < n:  # the whole band
-            for r in range(LANES):  # band_factor's test: the diagonal >= threshold x the largest below
-                diag = abs(J[_jx(k, KL, r)])
-                best = diag
-                for e in range(1, KL + 1):
-                    best = max(best, abs(J[_jx(k + e, KL - e, r)]))
-                kept[r] = kept[r] & (diag >= PIVOT_THRESHOLD * best) & (best > 0.0)
-            for r in range(LANES):
-                inv = 1.0 / J[_jx(k, KL, r)]  # the factors hold the pivot's reciprocal, as band_factor's
-                J[_jx(k, KL, r)] = inv
-                for e in range(1, KL + 1):
-                    f = J[_jx(k + e, KL - e, r)] * inv
-                    J[_jx(k + e, KL - e, r)] = f
-                    for c in range(1, KU + 1):
-                        J[_jx(k + e, KL - e + c, r)] -= f * J[_jx(k, KL + c, r)]
-            continue
-        for r in range(LANES):
-            diag = abs(J[_jx(k, KL, r)])
-            best = diag
-            for i in range(k + 1, n):
-                best = max(best, abs(J[_jx(i, k - i + KL, r)]))
-            kept[r] = kept[r] and diag >= PIVOT_THRESHOLD * best and best > 0.0
-        for r in range(LANES):
-            J[_jx(k, KL, r)] = 1.0 / J[_jx(k, KL, r)]
-        for i in range(k + 1, min(n, k + KL + 1)):
-            for r in range(LANES):
-                f = J[_jx(i, k - i + KL, r)] * J[_jx(k, KL, r)]
-                J[_jx(i, k - i + KL, r)] = f
-                if f != 0.0:
-                    for j in range(k + 1, min(n - 1, k + KU) + 1):
-                        J[_jx(i, j - i + KL, r)] -= f * J[_jx(k, j - k + KL, r)]
+    for k in range(n - KL):
+        _column(J, kept, k, KL)
+    _column(J, kept, n - 5, 4)  # the last KL = 5 columns
+    _column(J, kept, n - 4, 3)
+    _column(J, kept, n - 3, 2)
+    _column(J, kept, n - 2, 1)
+    _column(J, kept, n - 1, 0)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _forward(J, b, k, below):
+    """``band_solve``'s forward step from row ``k`` in every lane: ``below`` rows under it (a constant: :func:`solve`)."""
+    if k < 0:  # a band of fewer than KL rows; it also tells LLVM that k is not negative
+        return
+    for r in range(LANES):
+        bk = b[_ix(k, r)]
+        if bk != 0.0:
+            for e in range(1, below + 1):
+                b[_ix(k + e, r)] -= J[_jx(k + e, KL - e, r)] * bk
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _backward(J, b, k, right):
+    """``band_solve``'s back substitution of row ``k`` in every lane: ``right`` entries right of the diagonal (a constant)."""
+    if k < 0:  # as in _forward: without it LLVM leaves the lanes scalar
+        return
+    for r in range(LANES):
+        s = b[_ix(k, r)]
+        for e in range(1, right + 1):
+            s -= J[_jx(k, KL + e, r)] * b[_ix(k + e, r)]
+        b[_ix(k, r)] = s * J[_jx(k, KL, r)]
 
 
 @njit(cache=True, error_model="numpy")
 def solve(J, b, n):
-    """``band_solve`` for every lane with the factors of :func:`factor` (no row exchanges), in place in ``b``."""
-    for k in range(n):  # loops of the constant KL or KU where the band is whole, as band_solve's
-        whole = k + KL < n
-        for r in range(LANES):
-            bk = b[_ix(k, r)]
-            if bk != 0.0:
-                if whole:
-                    for e in range(1, KL + 1):
-                        b[_ix(k + e, r)] -= J[_jx(k + e, KL - e, r)] * bk
-                else:
-                    for i in range(k + 1, n):
-                        b[_ix(i, r)] -= J[_jx(i, k - i + KL, r)] * bk
-    for kk in range(n):  # k from n - 1 down
-        k = n - 1 - kk
-        if k < 0:  # never: it tells LLVM that k is not negative, which it needs to vectorize the lanes
-            break
-        whole = k + KU < n
-        for r in range(LANES):
-            s = b[_ix(k, r)]
-            if whole:
-                for e in range(1, KU + 1):
-                    s -= J[_jx(k, KL + e, r)] * b[_ix(k + e, r)]
-            else:
-                for j in range(k + 1, n):
-                    s -= J[_jx(k, j - k + KL, r)] * b[_ix(j, r)]
-            b[_ix(k, r)] = s * J[_jx(k, KL, r)]
+    """``band_solve`` for every lane with the factors of :func:`factor` (no row exchanges), in place in ``b``.
+
+    Written out as :func:`factor` is, each row with a constant count of entries, so that the lane
+    loops are vector code.
+    """
+    for k in range(n - KL):
+        _forward(J, b, k, KL)
+    _forward(J, b, n - 5, 4)  # the last KL = 5 rows (the last has none below)
+    _forward(J, b, n - 4, 3)
+    _forward(J, b, n - 3, 2)
+    _forward(J, b, n - 2, 1)
+    _backward(J, b, n - 1, 0)
+    _backward(J, b, n - 2, 1)
+    _backward(J, b, n - 3, 2)
+    _backward(J, b, n - 4, 3)
+    _backward(J, b, n - 5, 4)
+    for kk in range(n - KU):  # k from n - KU - 1 down
+        _backward(J, b, n - KU - 1 - kk, KU)
 
 
 @njit(cache=True, error_model="numpy")
