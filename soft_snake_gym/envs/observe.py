@@ -22,7 +22,7 @@ __all__ = ["scale_rates", "body_velocity", "swim_observation", "inch_observation
 drop_stale_cache(__file__, [geometry.__file__, layout.__file__])  # the cached kernels embed their code
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def scale_rates(action, scale, value, lo, hi, dt, out):
     """Physical rates from a normalized action.
 
@@ -54,7 +54,7 @@ def scale_rates(action, scale, value, lo, hi, dt, out):
     return sq
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def body_velocity(q, v, w):
     """Heading of the tail-to-head chord [rad] and the centre-of-mass velocity along it and to its left.
 
@@ -71,7 +71,7 @@ def body_velocity(q, v, w):
     return heading, c * vx + s * vy, c * vy - s * vx
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _clip_into(raw, low, high, out):
     for i in range(raw.size):
         x = raw[i]
@@ -82,7 +82,7 @@ def _clip_into(raw, low, high, out):
         out[i] = x
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def swim_observation(q, v, kbar, w, goal, low, high, raw, out, geo):
     """The ``SoftEel-v0`` observation.
 
@@ -98,7 +98,7 @@ def swim_observation(q, v, kbar, w, goal, low, high, raw, out, geo):
     return swim_observation_curved(q, v, kbar, w, goal, low, high, raw, out)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def swim_observation_curved(q, v, kbar, w, goal, low, high, raw, out):
     """:func:`swim_observation` with the curvatures and their rates already in ``raw[:2 (N-2)]``.
 
@@ -116,7 +116,7 @@ def swim_observation_curved(q, v, kbar, w, goal, low, high, raw, out):
     return heading
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def inch_observation(q, v, lbar, friction, ground, w, low, high, raw, out, geo):
     """The ``SoftWorm-v0`` observation.
 

@@ -197,7 +197,7 @@ class TaskArrays(NamedTuple):
         return task_arrays_over, (self.f, self.obs, self.w.shape[-1], self.act.shape[-1], self.path.shape[-2])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def task_offsets(N: int, n_act: int, n_obs: int, n_path: int) -> tuple[int, ...]:
     """Where ``rs``, ``act``, ``uk``, ``ul``, ``w``, ``low``, ``high``, ``raw``, ``path`` start in a robot's block ``f``, and its size.
 
@@ -294,7 +294,7 @@ def _observe(s, t, curved):
     )
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _com(q, w):
     """Centre of mass of flat interleaved positions ``q`` with mass fractions ``w``."""
     x = 0.0
@@ -305,7 +305,7 @@ def _com(q, w):
     return x, y
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _navigate(tp, rs, path, x, y, search_all):
     """Where the robot at ``(x, y)`` stands in a navigation task; sets the direction to steer.
 
@@ -355,7 +355,7 @@ def _navigate(tp, rs, path, x, y, search_all):
     tp[T_GSIN] = math.sin(direction)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _metrics(out, prm, tp, rs):
     """Episode averages of docs/model.md §8 from the accumulated energies and the centre of mass.
 
@@ -388,7 +388,7 @@ def _metrics(out, prm, tp, rs):
     rs[M_WACT] = out[L.O_W_ACT]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def robot_reset(s, t):
     """After the simulator's reset of ``s`` (:class:`~soft_snake_gym.physics.SimArrays`).
 
@@ -409,7 +409,7 @@ def robot_reset(s, t):
     rs[R_HEADING] = _observe(s, t, False)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def robot_step(s, t):
     """One control step of one robot; returns the status.
 
@@ -524,7 +524,7 @@ def step_end(s, t, status, sq, before, curved):
     rs[R_REWARD] = rs[R_RF] + rs[R_RE] + rs[R_RC] + rs[R_RFAIL] + rs[R_RXTE] + rs[R_RSUCC]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def robot_step_blocks(sf, ibuf, tf, obs, n_act, n_path):
     """:func:`robot_step` of one robot given by its blocks: what the single env calls.
 
@@ -601,7 +601,7 @@ CRAWL_MIN = 4 * lanes.LANES
 (docs/performance_history.md, "Worms in lanes"); with fewer, the lanes idle while the last robots finish."""
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _crawls(active, s, lo, hi):
     """True if robots ``lo`` .. ``hi - 1`` go to :func:`_crawl`: at least ``CRAWL_MIN`` active ones, ``lanes.crawl_eligible``."""
     count = 0
@@ -739,7 +739,7 @@ def _step_block(active, s, t, status, first, scratch):
             status[i] = robot_step(si, ti)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def block_eligible(prm, tp):
     """True if :func:`block_step` takes the robot: a swimmer on SDIRK2, one step of ``h`` per control step.
 
@@ -754,7 +754,7 @@ def block_eligible(prm, tp):
     )
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def block_step(active, s, t, first, status, scratch):
     """:func:`robot_step` for the ``active`` robots of the ``LANES`` from ``first``, each SDIRK2 stage at once.
 
@@ -789,7 +789,7 @@ def block_step(active, s, t, first, status, scratch):
             continue
         before[0, r], before[1, r], before[2, r] = energies_before(si)
         if si.prm[L.P_LAG] == 0.0:  # stepper.simulate's start of a step
-            si.buf[L.B_LRATE, : si.lbar.size] = ti.ul
+            L.copy_into(si.buf[L.B_LRATE, : si.lbar.size], ti.ul)
         si.out[L.O_NJAC] = si.out[L.O_NRES] = si.out[L.O_NFACTOR] = 0.0
     lanes.take(s, t.uk, first, x, p)
     nsub = int(s.prm[first, L.P_SUBSTEPS])

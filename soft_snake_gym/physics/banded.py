@@ -93,7 +93,7 @@ def _factor(J, piv, n, threshold):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def band_factor(J: np.ndarray, piv: np.ndarray, n: int, threshold: float) -> bool:
     """Factor the band matrix in ``J`` in place with threshold pivoting; returns False if it is singular.
 
@@ -104,13 +104,13 @@ def band_factor(J: np.ndarray, piv: np.ndarray, n: int, threshold: float) -> boo
     return _factor(J, piv, n, threshold)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def band_lu(J: np.ndarray, piv: np.ndarray, n: int) -> bool:
     """Factor the band matrix in ``J`` in place with partial pivoting; returns False if it is singular."""
     return _factor(J, piv, n, 1.0)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def band_solve(J: np.ndarray, piv: np.ndarray, n: int, b: np.ndarray) -> None:
     """Solve ``A x = b`` in place in ``b`` with the factors of :func:`band_factor` or :func:`band_lu`."""
     reach = 0

@@ -62,7 +62,7 @@ def added_mass_coefficient(prm):
     return prm[P_RHO] * math.pi * prm[P_CA] * prm[P_A] * prm[P_A]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def elastic_energy(q, kbar, lbar, prm):
     """Stretching plus bending energy ``E_s + E_b`` (docs/model.md §3) [J]."""
     N = q.size // 2
@@ -142,7 +142,7 @@ def bending_blocks(be, g, u, ha, hb):
     )
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
     """Add internal (elastic, damping) and, if ``water``, drag forces into F (2N,) [N].
 
@@ -262,7 +262,7 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
     return power
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def added_mass(q, prm, dv, out, J, coef, apply, jac):
     """Added mass of docs/model.md §4.
 
@@ -290,7 +290,7 @@ def added_mass(q, prm, dv, out, J, coef, apply, jac):
                     add_block(J, a, b, m00, m01, m01, m11)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def solve_mass(q, prm, m, F, a, J, piv, water):
     """Accelerations ``a`` from ``(M + M_A(q)) a = F`` by a banded solve.
 
@@ -310,7 +310,7 @@ def solve_mass(q, prm, m, F, a, J, piv, water):
     band_solve(J, piv, n, a)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def fluid_momentum(geo, v, prm, R, sp, sg, J, dt, jac):
     """The water's kinetic energy ``T_f = sum_i 1/2 mu_n (v^i .
 
@@ -378,7 +378,7 @@ def momentum_block(sa, sb, nx, ny, parts):
     )
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def munk_force(q, v, prm, F):
     """Adds the velocity part of the consistent added-mass force to F (2N,) [N].
 
@@ -404,7 +404,7 @@ def munk_force(q, v, prm, F):
         F[2 * i + 3] += gt * ty + gn * ny + ct * ty + cn * ny
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def fluid_kinetic_energy(q, v, prm):
     """``T_f = sum_i 1/2 mu_n (v^i . n^i)^2``, the water's kinetic energy (docs/model.md §4) [J]."""
     N = q.size // 2
@@ -420,7 +420,7 @@ def fluid_kinetic_energy(q, v, prm):
     return tf
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def damping_power(q, v, prm, geo):
     """Power lost to material damping [W].
 
@@ -446,7 +446,7 @@ def damping_power(q, v, prm, geo):
     return p
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def actuator_power(q, kbar, lbar, u_k, u_l, prm, geo):
     """Power the inputs put into the body, ``dE/dkbar . u_k + dE/dlbar . u_l`` (docs/model.md §3) [W].
 

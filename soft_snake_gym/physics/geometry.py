@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def turning(q, j):
     """Turning quantities at interior node j (docs/model.md §2).
 
@@ -55,7 +55,7 @@ def _turning_of(ia, tax, tay, ib, tbx, tby):
     return kappa, g0x, g0y, -g0x - g2x, -g0y - g2y, g2x, g2y, tax, tay, tbx, tby, ia, ib
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def edge_geometry(q, geo):
     """Every edge's length, its reciprocal and unit tangent, once for the kernels that need them many times.
 
@@ -121,21 +121,21 @@ def _frame_of(l, tx, ty, v, i):
     return l, tx, ty, nx, ny, vx, vy, vx * tx + vy * ty, vx * nx + vy * ny
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def curvatures(q, kappa):
     """Discrete curvature ``kappa_j = 2 tan(phi_j/2)`` of the interior nodes, (N-2,) [-]."""
     for j in range(1, q.size // 2 - 1):
         kappa[j - 1] = turning(q, j)[0]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def curvature_rates(q, v, kdot):
     """Exact curvature rate ``(1 + kappa^2/4)(theta_dot^j - theta_dot^(j-1))``, (N-2,) [1/s]."""
     for j in range(1, q.size // 2 - 1):
         kdot[j - 1] = _curvature_rate(turning(q, j), v, j)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def curvatures_and_rates_at(geo, v, kappa, kdot):
     """:func:`curvatures` and :func:`curvature_rates` from the edge geometry ``geo`` of :func:`edge_geometry`."""
     for j in range(1, v.size // 2 - 1):
@@ -150,14 +150,14 @@ def _curvature_rate(turn, v, j):
     return (1.0 + 0.25 * k * k) * turning_rate(g0x, g0y, g1x, g1y, g2x, g2y, v, j)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def edge_lengths(q, out):
     """Current edge lengths ``|e^k|``, (N-1,) [m]."""
     for k in range(q.size // 2 - 1):
         out[k] = math.hypot(q[2 * k + 2] - q[2 * k], q[2 * k + 3] - q[2 * k + 1])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def edge_length_rates(q, v, out):
     """Rates ``t^k . (v[k+1] - v[k])`` of the edge lengths, (N-1,) [m/s]."""
     for k in range(q.size // 2 - 1):
@@ -167,7 +167,7 @@ def edge_length_rates(q, v, out):
         out[k] = (ex * (v[2 * k + 2] - v[2 * k]) + ey * (v[2 * k + 3] - v[2 * k + 1])) / l
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def node_tangent(q, i):
     """Unit tangent of the body at node i: along the sum of its edges' unit tangents."""
     N = q.size // 2
@@ -182,7 +182,7 @@ def node_tangent(q, i):
     return tx / l, ty / l
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _segments_cross(q, a, b):
     """True if edges a and b cross properly (a shared end or a mere touch does not count)."""
     p1x, p1y, p2x, p2y = q[2 * a], q[2 * a + 1], q[2 * a + 2], q[2 * a + 3]
@@ -194,7 +194,7 @@ def _segments_cross(q, a, b):
     return d1 * d2 < 0.0 and d3 * d4 < 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def self_intersects(q, keys, order):
     """Sweep and prune over the edges' x-extents.
 

@@ -365,7 +365,7 @@ def _elastic(x, p, cx, cv, jac):
                     _add_block(J, r, j - 1 + k // 3, j - 1 + k % 3, m00, m01, m10, m11)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def residual(x, p, dt, jac, res):
     """``stepper._be_residual`` in water with the consistent added mass, for every lane of a block.
 
@@ -467,7 +467,7 @@ def _column(J, kept, k, below):
                 J[_jx(k + e, KL - e + c, r)] -= f * J[_jx(k, KL + c, r)]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def factor(J, kept, n):
     """``band_factor`` of every lane's band in place, where it keeps every diagonal pivot.
 
@@ -521,7 +521,7 @@ def _backward(J, b, k, right):
         b[_ix(k, r)] = s * J[_jx(k, KL, r)]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def solve(J, b, n):
     """``band_solve`` for every lane with the factors of :func:`factor` (no row exchanges), in place in ``b``.
 
@@ -555,13 +555,13 @@ def allocate(n2):
                  z((3, LANES)), z(N * LANES))  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def eligible(prm):
     """True if a robot's stages can be solved here: water, the consistent added mass."""
     return int(prm[P_MEDIUM]) == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def take(s, uk, first, x, p):
     """Copy robots ``first`` .. ``first + LANES - 1`` of stacked ``SimArrays`` ``s`` (inputs ``uk``) into block ``x``.
 
@@ -639,7 +639,7 @@ def put(s, i, x, r, v):
         buf[B_A, k] = x.A[_ix(k, r)]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def stage_start(x, p, stage, dt):
     """``stepper.sdirk2_stage_start`` in water for every lane: the rest shape moved, the stage's solve set up.
 
@@ -684,7 +684,7 @@ def _momentum(E, v, p, P, n2):
             _momentum_edge(E, v, P, p[L_CM, r], 1.0, 0.0, i, r)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def stage_end(x, p, stage):
     """The lanes' part of ``stepper.sdirk2_stage_end``: the powers at the stage's end, into ``x.power``.
 
@@ -698,7 +698,7 @@ def stage_end(x, p, stage):
     n2 = q.size // LANES
     N = n2 // 2
     if stage == 1:
-        x.v0[:] = x.vstep
+        layout.copy_into(x.v0, x.vstep)
     _edge_geometry(q, E, n2)
     for r in range(LANES):
         power[0, r] = 0.0
@@ -740,7 +740,7 @@ def curvatures_into(x, r, raw):
         raw[j] = x.curv[_ix(j, r)]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def energies(x, p):
     """``stepper.ledger_energies``'s energies for every lane, after :func:`stage_end`, into ``x.energy``.
 
@@ -791,7 +791,7 @@ def _any_going(on, done):
     return False
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _full_step(x, n2):
     """``_be_newton``'s update at full length for the lanes :func:`_going`: ``v = vacc + 1 dv``.
 
@@ -812,7 +812,7 @@ def _full_step(x, n2):
                 v[_ix(k, r)] = vacc[_ix(k, r)]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def newton(s, first, go, x, p, dt, result):
     """:func:`stepper._be_newton` in water for the lanes with ``go[r]``, bit for bit.
 
@@ -827,7 +827,7 @@ def newton(s, first, go, x, p, dt, result):
     n2 = s.q.shape[1]
     on[:] = False  # lanes on the common path
     done[:] = 0  # 0: going on; else 1 + the iterations it converged in
-    x.guess[:] = x.v
+    layout.copy_into(x.guess, x.v)
     residual(x, p, dt, True, res)
     for r in range(LANES):
         if not go[r]:
@@ -907,7 +907,7 @@ def newton(s, first, go, x, p, dt, result):
 # --- the ground: backward-Euler steps of worms, each lane a worker ------------------------------
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def ground_residual(x, p, dt, res):
     """``stepper._be_residual`` on the ground with its Jacobian, for every lane of a block.
 
@@ -980,7 +980,7 @@ _STEP, _SUB, _TOP, _POINT, _TRIAL, _SOLVE, _SUB_END, _STEP_END = range(8)
 _ENDED, _RESIDUAL, _NEWTON_STEP = range(3)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def crawl_eligible(prm):
     """True if :func:`crawl` takes the robot: on the ground, backward Euler, isotropic friction."""
     return (
@@ -990,7 +990,7 @@ def crawl_eligible(prm):
     )
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
     """``stepper.simulate(robot, uk[i], ul[i], nsteps[k])`` for each robot ``i = robots[k]``, bit for bit.
 
@@ -1085,7 +1085,7 @@ def _newton_step(si, x, dt, r):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _next_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r):
     """Record the status of lane ``r``'s ended job, if any, and give it the next robot after the first ``taken``.
 
@@ -1105,7 +1105,7 @@ def _next_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r):
         wi[W_ROBOT, r], wi[W_SLOT, r], wi[W_PHASE, r] = i, k, _STEP
         wi[W_STEP, r], wi[W_NSTEPS, r], wi[W_STATUS, r] = 0, nsteps[k], OK
         if si.prm[P_LAG] == 0.0:  # as stepper.simulate: no lag, the rates jump to the inputs
-            si.buf[B_LRATE, : si.lbar.size] = ul[i]
+            layout.copy_into(si.buf[B_LRATE, : si.lbar.size], ul[i])
         if _work(si, uk[i], ul[i], x, p, wi, wf, dt, r) != _ENDED:
             return taken
 

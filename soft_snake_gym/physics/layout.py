@@ -231,9 +231,20 @@ def _borrowed(typingctx, arr):
     return arr(arr), codegen
 
 
-@overload(borrowed)
+@overload(borrowed, jit_options={"_nrt": True})
 def _borrowed_overload(arr):
     return lambda arr: _borrowed(arr)
+
+
+@njit(cache=True, inline="always")
+def copy_into(dst, src):
+    """``dst[:] = src`` for two 1-D arrays of one size, element by element.
+
+    In compiled code a slice assignment between arrays may allocate a temporary (where the two
+    overlap), which a kernel compiled without reference counting (``_nrt=False``) cannot.
+    """
+    for k in range(dst.size):
+        dst[k] = src[k]
 
 
 def rows_of(arr, start, rows, cols):
@@ -271,7 +282,7 @@ def _rows_of(typingctx, arr, start, rows, cols):
     return types.Array(arr.dtype, 2, "C")(arr, start, rows, cols), codegen
 
 
-@overload(rows_of)
+@overload(rows_of, jit_options={"_nrt": True})
 def _rows_of_overload(arr, start, rows, cols):
     return lambda arr, start, rows, cols: _rows_of(arr, start, rows, cols)
 

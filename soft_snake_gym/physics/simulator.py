@@ -158,7 +158,7 @@ def _body(kbar, lbar, heading, comx, comy):
     return x
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _simulate(f, ibuf, u_k, u_l, n_steps):
     """``stepper.simulate`` of the robot over its blocks ``f`` and ``ibuf`` (:meth:`Simulator.advance`).
 

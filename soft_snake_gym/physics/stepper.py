@@ -110,6 +110,7 @@ from soft_snake_gym.physics.layout import (
     SLIDING,
     STUCK,
     borrowed_arrays,
+    copy_into,
 )
 
 #: SDIRK2's diagonal coefficient (Alexander 1977): two backward-Euler stages of ``GAMMA dt``,
@@ -120,7 +121,7 @@ GAMMA = 1.0 - 1.0 / math.sqrt(2.0)
 drop_stale_cache(__file__, [banded.__file__, forces.__file__, geometry.__file__, layout.__file__])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def check_state(q, v, lbar, prm, buf, ibuf):
     """Status code of a state: non-finite, runaway stretch, or self-intersection."""
     n = q.size
@@ -163,7 +164,7 @@ def classify_contact(v, state, i, limit, at_limit):
     return False
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _be_residual(s, dt, medium, jac):
     """Residual of backward Euler at the trial velocity ``v``, and if ``jac`` its Jacobian into J.
 
@@ -235,7 +236,7 @@ def _be_residual(s, dt, medium, jac):
     return norm2, rmax, p_fluid, p_fric
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _stick_slow_nodes(v, ibuf, prm, n):
     """Stick every sliding node slower than ``V_tol`` that may still change; True if any did."""
     state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
@@ -251,7 +252,7 @@ def _stick_slow_nodes(v, ibuf, prm, n):
     return stuck_any
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _stick_reversing_nodes(v, dv, ahead, v0, ibuf, n):
     """Stick every node sliding since the step began that ``v + ahead dv`` turns back; True if any did.
 
@@ -280,7 +281,7 @@ def _stick_reversing_nodes(v, dv, ahead, v0, ibuf, n):
     return stuck_any
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _update_contacts(v, buf, ibuf, prm, dt, n):
     """Make stick-slip consistent with the end of a converged step (docs/model.md §5).
 
@@ -322,7 +323,7 @@ def _release(v, state, i, px, py, vtol):
     v[2 * i + 1] = 2.0 * vtol * py / p
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _be_substep(s, dt, medium, extrapolate):
     """One backward-Euler step by damped Newton on the banded analytic Jacobian (docs/model.md §5a).
 
@@ -334,7 +335,7 @@ def _be_substep(s, dt, medium, extrapolate):
     return _be_newton(s, dt, medium)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _be_start(s, medium, extrapolate):
     """Record the start of an implicit step in ``buf`` and make the first guess (contacts, velocity)."""
     q, v, prm, buf, J, ibuf = s.q, s.v, s.prm, s.buf, s.J, s.ibuf
@@ -379,7 +380,7 @@ def _be_start(s, medium, extrapolate):
             fluid_momentum(geo, v0, prm, p0, 1.0, 0.0, J, 0.0, False)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _sdirk2_second_start(s, medium):
     """Turn the end of SDIRK2's first stage into the start of its second (docs/model.md §5a).
 
@@ -408,7 +409,7 @@ def _sdirk2_second_start(s, medium):
         v[i] = v0[i] + change
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _be_newton(s, dt, medium):
     """Solve the implicit step that :func:`_be_start` set up; see :func:`_be_substep`."""
     q, v, prm, buf, J, ibuf = s.q, s.v, s.prm, s.buf, s.J, s.ibuf
@@ -505,7 +506,7 @@ def _be_newton(s, dt, medium):
     return OK, it, rmax, p_fluid, p_fric
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _symplectic_substep(s, dt, medium):
     """One explicit semi-implicit (symplectic) Euler step: kick with F(q, v), then drift.
 
@@ -546,7 +547,7 @@ def _symplectic_substep(s, dt, medium):
     return p_fluid, p_fric
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def ledger_energies(s):
     """Write the body's energies, the water's ``T_f`` and the energy ledger into ``out``.
 
@@ -636,7 +637,7 @@ def ledger(out):
     out[O_LEDGER + 7] = error
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _move_rest_shape(kbar, lbar, lrate, u_k, u_l, dt, tau):
     """Advance the rest shape by ``dt``; ``BAD_REST_LENGTH`` if a rest length ends <= 0.
 
@@ -658,7 +659,7 @@ def _move_rest_shape(kbar, lbar, lrate, u_k, u_l, dt, tau):
     return status
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _sdirk2_substep(s, dt, medium, u_k, u_l, damped):
     """One SDIRK2 step of ``dt`` (docs/model.md §5a): two backward-Euler stages of ``GAMMA dt``.
 
@@ -681,7 +682,7 @@ def _sdirk2_substep(s, dt, medium, u_k, u_l, damped):
     return status, iters, res, e_fluid, e_damp, e_fric, e_act
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def sdirk2_stage_start(s, stage, dt, medium, u_k, u_l):
     """Move the rest shape to SDIRK2 stage ``stage``'s time and set up its backward-Euler solve.
 
@@ -699,7 +700,7 @@ def sdirk2_stage_start(s, stage, dt, medium, u_k, u_l):
     return status
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def sdirk2_stage_end(s, stage, dt, u_k, damped, newton, acc):
     """Account SDIRK2 stage ``stage`` solved with ``newton`` (:func:`_be_newton`'s result).
 
@@ -710,7 +711,7 @@ def sdirk2_stage_end(s, stage, dt, u_k, damped, newton, acc):
     q, v, kbar, prm, buf = s.q, s.v, s.kbar, s.prm, s.buf
     lrate, geo = buf[B_LRATE, : s.lbar.size], buf[B_GEO : B_GEO + 2]
     if stage == 1:
-        buf[B_V0, :] = buf[B_VSTEP]  # the step's start, for the next step's first guess
+        copy_into(buf[B_V0], buf[B_VSTEP])  # the step's start, for the next step's first guess
     edge_geometry(q, geo)
     p_act = actuator_power(q, kbar, s.lbar, u_k, lrate, prm, geo)
     p_damp = damping_power(q, v, prm, geo) if damped else 0.0
@@ -734,7 +735,7 @@ def sdirk2_stage_sums(stage, dt, damped, newton, p_act, p_damp, acc):
     return status, (iters + it, res, e_fluid, e_damp, e_fric, e_act)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _bdf2_substep(s, dt, medium):
     """One BDF2 step of ``dt``: a backward-Euler stage of ``2 dt / 3`` from ``(4 y_n - y_(n-1)) / 3``.
 
@@ -745,7 +746,7 @@ def _bdf2_substep(s, dt, medium):
     q, prm, buf, J = s.q, s.prm, s.buf, s.J
     n = q.size
     qprev, vprev = buf[B_QPREV], buf[B_VSTEP]
-    vprev[:] = buf[B_V0]
+    copy_into(vprev, buf[B_V0])
     _be_start(s, medium, 1.0)
     q0, v0 = buf[B_Q0], buf[B_V0]
     if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
@@ -762,7 +763,7 @@ def _bdf2_substep(s, dt, medium):
         qprev[i] = qn
         vprev[i] = vn
     result = _be_newton(s, 2.0 * dt / 3.0, medium)
-    buf[B_V0, :] = vprev  # the step's start, for the next step's first guess and history
+    copy_into(buf[B_V0], vprev)  # the step's start, for the next step's first guess and history
     return result
 
 
@@ -772,7 +773,7 @@ def is_damped(prm):
     return prm[P_DBEND] > 0.0 or prm[P_DSTRETCH] > 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def move_rest_shape(s, u_k, u_l, dt):
     """The start of an integrator's sub-step of ``dt``: the actuator power, then the rest shape moved.
 
@@ -789,7 +790,7 @@ def move_rest_shape(s, u_k, u_l, dt):
     return _move_rest_shape(kbar, lbar, lrate, u_k, u_l, dt, prm[P_LAG]), p_act0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def implicit_energies(s, u_k, dt, p_act0, p_fluid, p_fric):
     """The end of an implicit sub-step of ``dt``: (fluid, damping, friction energy, actuator work) [J].
 
@@ -804,7 +805,7 @@ def implicit_energies(s, u_k, dt, p_act0, p_fluid, p_fric):
     return dt * p_fluid, dt * p_damp, dt * p_fric, 0.5 * dt * (p_act0 + p_act1)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def simulate(s, u_k, u_l, n_steps):
     """Advance one robot by ``n_steps`` steps of ``h`` with inputs held constant; stops at the first failure.
 
@@ -838,7 +839,7 @@ def simulate(s, u_k, u_l, n_steps):
     lrate = buf[B_LRATE, : lbar.size]  # the length actuators' rates (docs/model.md §3)
     geo = buf[B_GEO : B_GEO + 2]  # the edge geometry of q for the powers (geometry.edge_geometry)
     if tau == 0.0:
-        lrate[:] = u_l  # no lag: the rates jump to the inputs (and _move_rest_shape keeps them there)
+        copy_into(lrate, u_l)  # no lag: the rates jump to the inputs (and _move_rest_shape keeps them there)
     status = OK
     for _ in range(n_steps):
         e_fluid = 0.0
@@ -851,7 +852,7 @@ def simulate(s, u_k, u_l, n_steps):
         for _s in range(nsub):
             if sdirk2 or (bdf2 and math.isnan(buf[B_QPREV, 0])):
                 if bdf2:  # a fresh state (Simulator.set_state): BDF2 starts with one SDIRK2 step
-                    buf[B_QPREV, :] = q
+                    copy_into(buf[B_QPREV], q)
                 status, it, res, ef, ed, efr, ea = _sdirk2_substep(s, dt, medium, u_k, u_l, damped)
             else:
                 status, p_act0 = move_rest_shape(s, u_k, u_l, dt)
