@@ -50,8 +50,17 @@ def test_batch_matches_single_simulators_bit_for_bit_with_any_thread_count():
     assert not np.array_equal(results[0][0][0], results[0][0][1])  # the robots really differ
 
 
+def _alive_after(env, rng: np.random.Generator, steps: int) -> int:
+    """How many of numba's allocations are alive (allocated, not yet freed) after ``steps`` steps of ``env``."""
+    for _ in range(steps):
+        env.step(rng.uniform(-0.5, 0.5, env.action_space.shape))
+    gc.collect()
+    stats = rtsys.get_allocation_stats()
+    return stats.mi_alloc - stats.mi_free
+
+
 def test_the_kernels_compiled_without_reference_counts_leak_nothing_and_free_nothing():
-    """numba's allocation statistics over the steps of the single envs and of the batched ones.
+    """Numba's allocation statistics over the steps of the single envs and of the batched ones.
 
     The hot kernels are compiled with ``_nrt=False`` (docs/architecture.md): one that kept an
     array some callee allocated would leak it every step, one that let go of a reference it
@@ -69,16 +78,8 @@ def test_the_kernels_compiled_without_reference_counts_leak_nothing_and_free_not
         for env in envs:
             env.reset(seed=0)
             rng = np.random.default_rng(0)
-
-            def alive_after(steps: int) -> int:
-                for _ in range(steps):
-                    env.step(rng.uniform(-0.5, 0.5, env.action_space.shape))
-                gc.collect()
-                stats = rtsys.get_allocation_stats()
-                return stats.mi_alloc - stats.mi_free
-
-            alive = alive_after(5)  # compiled, and the first infos built
-            assert alive_after(10) == alive, env
+            alive = _alive_after(env, rng, 5)  # compiled, and the first infos built
+            assert _alive_after(env, rng, 10) == alive, env
     finally:
         _nrt_python.memsys_disable_stats()
 

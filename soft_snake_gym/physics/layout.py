@@ -17,7 +17,10 @@ each. Other calls from Python pass ``tuple(arrays)`` and the kernel turns it bac
 ``SimArrays`` on entry (:func:`borrowed_arrays`): numba's dispatcher types a plain tuple of
 arrays in C but a NamedTuple in Python, about 5 µs more per call. Both give the kernels
 :func:`borrowed` views: numba keeps an atomic reference count on every view of an unboxed
-array, which was a quarter of a single env's compiled step.
+array, which was a quarter of a single env's compiled step. A borrowed view still calls numba's
+runtime at each count (which returns at once), so the kernels that allocate no array and return
+none are compiled without counts at all (``_nrt=False``, docs/architecture.md); where they copy
+one array into another they use :func:`copy_into`.
 """
 
 from __future__ import annotations
