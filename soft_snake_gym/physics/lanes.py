@@ -18,7 +18,9 @@ loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/
 - a loop that does the same to every element of its arrays runs over the flat index, not over
   elements and lanes: LLVM unrolls a lane loop with a small body whole before its loop
   vectorizer runs, and the unrolled code stays scalar (numba runs no SLP vectorizer), where a
-  flat loop becomes vector code behind a runtime test that the arrays do not overlap;
+  flat loop becomes vector code behind a runtime test that the arrays do not overlap; a small
+  body that cannot run flat (a sum over a lane's elements) runs over a count LLVM does not
+  know, the columns of ``res`` (:func:`_norms`), which it vectorizes and does not unroll;
 - indices are unsigned (no negative-index test per access), and a flag that chooses between
   paths (``jac``) is a constant in each compiled body, or the loop runs both paths masked;
 - inside a lane loop, a loop runs a constant count (a variable count keeps the lane loop
@@ -68,6 +70,7 @@ from soft_snake_gym.physics.layout import (
     B_GEO,
     B_LRATE,
     B_M,
+    B_MINV,
     B_P0,
     B_Q0,
     B_R,
@@ -144,9 +147,10 @@ class Block(NamedTuple):
     stage's start ``q0``, ``v0``, the water's momentum there ``p0``, the step's start velocity
     ``vstep``, the forces ``F``, residual ``R`` and ``A`` (``buf``'s rows of those names), the
     rest shape ``kbar``, ``lbar``, the inputs ``uk`` and the length rates ``lrate``, and the
-    edges' lengths, their reciprocals and unit tangents ``E`` (four rows an edge; ``buf[B_GEO]``). ``fext`` and
-    ``m`` are copied in only. The rest is work: the band ``J``, Newton's ``vacc``, ``dv`` and
-    the stage's first guess ``guess``; :func:`newton`'s per-lane residual figures ``res``,
+    edges' lengths, their reciprocals and unit tangents ``E`` (four rows an edge; ``buf[B_GEO]``). ``fext``,
+    ``m`` and ``minv`` (the masses' reciprocals, ``buf[B_MINV]``) are copied in only. The rest is
+    work: the band ``J``, Newton's ``vacc``, ``dv`` and the stage's first guess ``guess``;
+    :func:`newton`'s per-lane residual figures ``res``,
     ``res1``, the lanes whose factors kept their rows ``kept``, the lanes on the common path
     ``on`` and how each ended ``done``; the stage's actuator and damping power per lane
     ``power`` (2, LANES), the curvatures and their rates at the stage's end ``curv`` (2 (N-2)
@@ -183,6 +187,7 @@ class Block(NamedTuple):
     curv: np.ndarray
     energy: np.ndarray
     stuck: np.ndarray
+    minv: np.ndarray
 
 
 @njit(cache=True, inline="always")
@@ -422,9 +427,7 @@ def _residual(x, p, dt, jac, res):
     for k in range(R.size):
         R[k] = m[k] * A[k] - dt * F[k]
     if jac:
-        for i in range(n2):
-            for r in range(LANES):
-                J[_jx(i, KL, r)] += m[_ix(i, r)]
+        _add_masses(J, m, res.shape[1])
     for i in range(n2 // 2 - 1):  # the water's momentum: fluid_momentum(sp = 1, sg = -dt)
         for r in range(LANES):
             cm = p[L_CM, r]
@@ -435,15 +438,36 @@ def _residual(x, p, dt, jac, res):
                 _momentum_block(J, r, i, i + 1, -1.0, 1.0, nx, ny, parts)
                 _momentum_block(J, r, i + 1, i, 1.0, -1.0, nx, ny, parts)
                 _momentum_block(J, r, i + 1, i + 1, 1.0, 1.0, nx, ny, parts)
+    for k in range(R.size):
+        R[k] -= p0[k]
+    _norms(R, x.minv, res)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _add_masses(J, m, lanes):
+    """``J``'s diagonal += the masses ``m``, for every lane; ``lanes`` = ``LANES``, a count LLVM does not know (:func:`_norms`)."""
+    for i in range(m.size // LANES):
+        for r in range(lanes):
+            J[(i * BAND + KL) * LANES + r] += m[i * LANES + r]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _norms(R, minv, res):
+    """``_be_residual``'s norms of the residual ``R`` for every lane: ``res[L_NORM2]`` = |R|^2, ``res[L_RMAX]`` = max |R|/m.
+
+    The lane loop runs over ``res``'s columns, a count LLVM does not know: over ``LANES`` it
+    unrolled the small body whole and the sums stayed scalar, one element at a time with a
+    division each (docs/performance_history.md, "The residual's norms in vector code").
+    """
+    lanes = res.shape[1]  # = LANES
     for r in range(LANES):
         res[L_NORM2, r] = 0.0
         res[L_RMAX, r] = 0.0
-    for i in range(n2):
-        for r in range(LANES):
-            e = R[_ix(i, r)] - p0[_ix(i, r)]
-            R[_ix(i, r)] = e
+    for i in range(R.size // LANES):
+        for r in range(lanes):
+            e = R[i * LANES + r]
             res[L_NORM2, r] += e * e
-            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) * (1.0 / m[_ix(i, r)]))  # as _be_residual's B_MINV
+            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) * minv[i * LANES + r])
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -552,7 +576,7 @@ def allocate(n2):
                  z(n), z(n2 * BAND * LANES), z(n), z(n), z(4 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
                  z((N_LANE_RES, LANES)), z(LANES, dtype=np.bool_), z(LANES, dtype=np.bool_),
                  z(LANES, dtype=np.int64), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z((2, LANES)), z(2 * (N - 2) * LANES),
-                 z((3, LANES)), z(N * LANES))  # fmt: skip
+                 z((3, LANES)), z(N * LANES), z(n))  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -580,6 +604,7 @@ def take(s, uk, first, x, p):
             x.v0[_ix(k, r)] = buf[B_V0, k]
             x.fext[_ix(k, r)] = buf[B_FEXT, k]
             x.m[_ix(k, r)] = buf[B_M, k]
+            x.minv[_ix(k, r)] = buf[B_MINV, k]
         for k in range(s.kbar.shape[1]):
             x.kbar[_ix(k, r)] = s.kbar[i, k]
             x.uk[_ix(k, r)] = uk[i, k]
@@ -925,9 +950,7 @@ def ground_residual(x, p, dt, res):
     _elastic(x, p, cx, cv, True)
     for k in range(R.size):
         R[k] = m[k] * A[k] - dt * F[k]
-    for i in range(n2):
-        for r in range(LANES):
-            J[_jx(i, KL, r)] += m[_ix(i, r)]
+    _add_masses(J, m, res.shape[1])
     for r in range(LANES):
         res[L_PFRIC, r] = 0.0
     for i in range(n2 // 2):
@@ -952,14 +975,7 @@ def ground_residual(x, p, dt, res):
                     if c != KL:
                         J[_jx(r0, c, r)] = 0.0
                         J[_jx(r1, c, r)] = 0.0
-    for r in range(LANES):
-        res[L_NORM2, r] = 0.0
-        res[L_RMAX, r] = 0.0
-    for i in range(n2):
-        for r in range(LANES):
-            e = R[_ix(i, r)]
-            res[L_NORM2, r] += e * e
-            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) * (1.0 / m[_ix(i, r)]))  # as _be_residual's B_MINV
+    _norms(R, x.minv, res)
 
 
 # a worker lane's state, rows of (N_WORK_INT, LANES) int64 and (N_WORK, LANES) float64 arrays:
@@ -1149,6 +1165,7 @@ def _start_solve(si, x, p, r):
         x.v0[_ix(k, r)] = buf[B_V0, k]
         x.fext[_ix(k, r)] = buf[B_FEXT, k]
         x.m[_ix(k, r)] = buf[B_M, k]
+        x.minv[_ix(k, r)] = buf[B_MINV, k]
     for k in range(si.kbar.size):
         x.kbar[_ix(k, r)] = si.kbar[k]
     for k in range(si.lbar.size):

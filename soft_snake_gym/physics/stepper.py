@@ -268,11 +268,9 @@ def _stick_reversing_nodes(v, dv, ahead, v0, ibuf, n):
     stuck_any = False
     for i in range(n // 2):
         r0, r1 = 2 * i, 2 * i + 1
-        if (
-            state[i] == SLIDING
-            and switches[i] == 0
-            and (v[r0] + ahead * dv[r0]) * v0[r0] + (v[r1] + ahead * dv[r1]) * v0[r1] < 0.0
-        ):
+        # one branch a node, on all three tests at once (&, not and: three were mispredicted)
+        turns = (v[r0] + ahead * dv[r0]) * v0[r0] + (v[r1] + ahead * dv[r1]) * v0[r1] < 0.0
+        if turns & (state[i] == SLIDING) & (switches[i] == 0):
             state[i] = STUCK
             switches[i] += 1
             v[r0] = 0.0
