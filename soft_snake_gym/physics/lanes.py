@@ -148,7 +148,7 @@ class Block(NamedTuple):
     ``vstep``, the forces ``F``, residual ``R`` and ``A`` (``buf``'s rows of those names), the
     rest shape ``kbar``, ``lbar``, the inputs ``uk`` and the length rates ``lrate``, and the
     edges' lengths, their reciprocals and unit tangents ``E`` (four rows an edge; ``buf[B_GEO]``). ``fext``,
-    ``m`` and ``minv`` (the masses' reciprocals, ``buf[B_MINV]``) are copied in only. The rest is
+    ``m`` and, on the ground, ``minv`` (the masses' reciprocals, ``buf[B_MINV]``) are copied in only. The rest is
     work: the band ``J``, Newton's ``vacc``, ``dv`` and the stage's first guess ``guess``;
     :func:`newton`'s per-lane residual figures ``res``,
     ``res1``, the lanes whose factors kept their rows ``kept``, the lanes on the common path
@@ -427,7 +427,9 @@ def _residual(x, p, dt, jac, res):
     for k in range(R.size):
         R[k] = m[k] * A[k] - dt * F[k]
     if jac:
-        _add_masses(J, m, res.shape[1])
+        for i in range(n2):
+            for r in range(LANES):
+                J[_jx(i, KL, r)] += m[_ix(i, r)]
     for i in range(n2 // 2 - 1):  # the water's momentum: fluid_momentum(sp = 1, sg = -dt)
         for r in range(LANES):
             cm = p[L_CM, r]
@@ -438,9 +440,15 @@ def _residual(x, p, dt, jac, res):
                 _momentum_block(J, r, i, i + 1, -1.0, 1.0, nx, ny, parts)
                 _momentum_block(J, r, i + 1, i, 1.0, -1.0, nx, ny, parts)
                 _momentum_block(J, r, i + 1, i + 1, 1.0, 1.0, nx, ny, parts)
-    for k in range(R.size):
-        R[k] -= p0[k]
-    _norms(R, x.minv, res)
+    for r in range(LANES):
+        res[L_NORM2, r] = 0.0
+        res[L_RMAX, r] = 0.0
+    for i in range(n2):
+        for r in range(LANES):
+            e = R[_ix(i, r)] - p0[_ix(i, r)]
+            R[_ix(i, r)] = e
+            res[L_NORM2, r] += e * e
+            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) * (1.0 / m[_ix(i, r)]))  # as _be_residual's B_MINV
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -604,7 +612,6 @@ def take(s, uk, first, x, p):
             x.v0[_ix(k, r)] = buf[B_V0, k]
             x.fext[_ix(k, r)] = buf[B_FEXT, k]
             x.m[_ix(k, r)] = buf[B_M, k]
-            x.minv[_ix(k, r)] = buf[B_MINV, k]
         for k in range(s.kbar.shape[1]):
             x.kbar[_ix(k, r)] = s.kbar[i, k]
             x.uk[_ix(k, r)] = uk[i, k]
