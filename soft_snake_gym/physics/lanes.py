@@ -456,7 +456,7 @@ def _add_masses(J, m, lanes):
     """``J``'s diagonal += the masses ``m``, for every lane; ``lanes`` = ``LANES``, a count LLVM does not know (:func:`_norms`)."""
     for i in range(m.size // LANES):
         for r in range(lanes):
-            J[(i * BAND + KL) * LANES + r] += m[i * LANES + r]
+            J[_jx(i, KL, r)] += m[_ix(i, r)]
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -473,9 +473,9 @@ def _norms(R, minv, res):
         res[L_RMAX, r] = 0.0
     for i in range(R.size // LANES):
         for r in range(lanes):
-            e = R[i * LANES + r]
+            e = R[_ix(i, r)]
             res[L_NORM2, r] += e * e
-            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) * minv[i * LANES + r])
+            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) * minv[_ix(i, r)])
 
 
 @njit(cache=True, inline="always", error_model="numpy")
