@@ -560,7 +560,7 @@ def _backward_row(J, b, k):
     Inlined into :func:`solve`'s loop over rows, its lane loop stays scalar whatever its form
     (loads before stores, the lanes four at a time, the sum taken term by term); compiled alone,
     with ``k`` an argument, LLVM vectorizes it before numba links it into :func:`solve`, and a
-    solve of 16 eels' bands takes 0.50 to 0.53 µs instead of 0.73 (performance_history.md, "The
+    solve of 16 eels' bands takes 0.50 to 0.53 µs instead of 0.73 (docs/performance_history.md, "The
     back substitution's rows as functions of their own").
     """
     _backward(J, b, k, KU)
