@@ -427,9 +427,7 @@ def _residual(x, p, dt, jac, res):
     for k in range(R.size):
         R[k] = m[k] * A[k] - dt * F[k]
     if jac:
-        for i in range(n2):
-            for r in range(LANES):
-                J[_jx(i, KL, r)] += m[_ix(i, r)]
+        _add_masses(J, m, res.shape[1])
     for i in range(n2 // 2 - 1):  # the water's momentum: fluid_momentum(sp = 1, sg = -dt)
         for r in range(LANES):
             cm = p[L_CM, r]
