@@ -1055,40 +1055,46 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
     taken = 0
     for r in range(LANES):
         wi[W_ROBOT, r] = -1
-        taken = _next_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
+        taken = _next_job(s, uk, ul, robots, nsteps, status, taken, wi, r)
+    started = False  # the first pass starts the lanes' jobs, before any residual
     while True:
         busy = False
         for r in range(LANES):
             busy |= wi[W_ROBOT, r] >= 0
         if not busy:
             return
-        ground_residual(x, p, dt, x.res)
+        if started:
+            ground_residual(x, p, dt, x.res)
+        started = True
+        # each lane goes on from its residual; then, if any is at a Newton step, those lanes go
+        # on from band_factor and band_solve on -R, made at once. A lane whose job ends takes
+        # the next robot and starts its job in the same pass
         solving = False
-        for r in range(LANES):
-            i = wi[W_ROBOT, r]
-            if i < 0:
-                continue
-            si = layout.sim_views(s.f[i], s.ibuf[i])
-            awaits = _work(si, uk[i], ul[i], x, p, wi, wf, dt, r)
-            if awaits == _ENDED:
-                taken = _next_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
-            solving |= awaits == _NEWTON_STEP
-        if not solving:
-            continue
-        # the lanes at a Newton step: band_factor and band_solve on -R, at once
-        factor(x.J, x.kept, n2)
-        for k in range(n2 * LANES):
-            x.dv[k] = -x.R[k]
-        solve(x.J, x.dv, n2)
-        for r in range(LANES):
-            i = wi[W_ROBOT, r]
-            if i < 0 or wi[W_PHASE, r] != _SOLVE:
-                continue
-            si = layout.sim_views(s.f[i], s.ibuf[i])
-            if not _newton_step(si, x, dt, r):
-                wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
-            if _work(si, uk[i], ul[i], x, p, wi, wf, dt, r) == _ENDED:
-                taken = _next_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r)
+        for solved in (False, True):
+            if solved:
+                if not solving:
+                    break
+                factor(x.J, x.kept, n2)
+                for k in range(n2 * LANES):
+                    x.dv[k] = -x.R[k]
+                solve(x.J, x.dv, n2)
+            for r in range(LANES):
+                i = wi[W_ROBOT, r]
+                if i < 0 or (solved and wi[W_PHASE, r] != _SOLVE):
+                    continue
+                si = layout.sim_views(s.f[i], s.ibuf[i])
+                if solved and not _newton_step(si, x, dt, r):
+                    wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
+                while True:
+                    awaits = _work(si, uk[i], ul[i], x, p, wi, wf, dt, r)
+                    if awaits != _ENDED:
+                        break
+                    taken = _next_job(s, uk, ul, robots, nsteps, status, taken, wi, r)
+                    i = wi[W_ROBOT, r]
+                    if i < 0:
+                        break
+                    si = layout.sim_views(s.f[i], s.ibuf[i])
+                solving |= awaits == _NEWTON_STEP
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -1121,28 +1127,24 @@ def _newton_step(si, x, dt, r):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _next_job(s, uk, ul, robots, nsteps, status, taken, x, p, wi, wf, dt, r):
+def _next_job(s, uk, ul, robots, nsteps, status, taken, wi, r):
     """Record the status of lane ``r``'s ended job, if any, and give it the next robot after the first ``taken``.
 
-    Returns how many are taken now. Robots whose job ends before its first residual (a rest
-    length that fails) end here too; the lane is left empty (``W_ROBOT`` -1) when none is left.
+    Returns how many are taken now. The new job starts at its first step (``_STEP``); the lane
+    is left empty (``W_ROBOT`` -1) when no robot is left.
     """
-    while True:
-        if wi[W_ROBOT, r] >= 0:
-            status[wi[W_SLOT, r]] = wi[W_STATUS, r]
-        if taken == robots.size:
-            wi[W_ROBOT, r] = -1
-            return taken
-        k = taken
-        taken += 1
-        i = robots[k]
-        si = layout.sim_views(s.f[i], s.ibuf[i])
-        wi[W_ROBOT, r], wi[W_SLOT, r], wi[W_PHASE, r] = i, k, _STEP
-        wi[W_STEP, r], wi[W_NSTEPS, r], wi[W_STATUS, r] = 0, nsteps[k], OK
-        if si.prm[P_LAG] == 0.0:  # as stepper.simulate: no lag, the rates jump to the inputs
-            layout.copy_into(si.buf[B_LRATE, : si.lbar.size], ul[i])
-        if _work(si, uk[i], ul[i], x, p, wi, wf, dt, r) != _ENDED:
-            return taken
+    if wi[W_ROBOT, r] >= 0:
+        status[wi[W_SLOT, r]] = wi[W_STATUS, r]
+    if taken == robots.size:
+        wi[W_ROBOT, r] = -1
+        return taken
+    i = robots[taken]
+    si = layout.sim_views(s.f[i], s.ibuf[i])
+    wi[W_ROBOT, r], wi[W_SLOT, r], wi[W_PHASE, r] = i, taken, _STEP
+    wi[W_STEP, r], wi[W_NSTEPS, r], wi[W_STATUS, r] = 0, nsteps[taken], OK
+    if si.prm[P_LAG] == 0.0:  # as stepper.simulate: no lag, the rates jump to the inputs
+        layout.copy_into(si.buf[B_LRATE, : si.lbar.size], ul[i])
+    return taken + 1
 
 
 @njit(cache=True, inline="always", error_model="numpy")
