@@ -1201,11 +1201,20 @@ def _work(si, u_k, u_l, x, p, wi, wf, dt, r):
     """Run lane ``r``'s job on until it awaits something; returns what (``_RESIDUAL``, ``_NEWTON_STEP``, ``_ENDED``).
 
     The phases are ``stepper.simulate``'s loops and ``_be_newton``'s on the ground (never a chord
-    step there), in their order. A lane that awaited a residual (``_POINT``, ``_TRIAL``) finds it
-    in ``x.res`` and the robot's ``q``, ``F``, ``R``, ``A``, its Jacobian in its lane of ``x.J``;
-    one that awaited a Newton step (``_SOLVE``) finds ``vacc`` and ``dv`` in the robot's ``buf``.
-    An ended job's status is in ``W_STATUS``.
+    step there), in their order (:func:`_advance`). A lane that awaited a residual (``_POINT``,
+    ``_TRIAL``) finds it in ``x.res`` and the robot's ``q``, ``F``, ``R``, ``A``, its Jacobian in
+    its lane of ``x.J``; one that awaited a Newton step (``_SOLVE``) finds ``vacc`` and ``dv`` in
+    the robot's ``buf``. An ended job's status is in ``W_STATUS``.
     """
+    awaits, phase, jac = _advance(si, u_k, u_l, x, p, wi, wf, dt, r)
+    if awaits == _RESIDUAL:  # one place that hands the iterate to the lane
+        _await(si, x, wi, r, phase, jac)
+    return awaits
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
+    """:func:`_work`'s phases: (what the lane awaits, the phase it awaits in, whether with the Jacobian)."""
     q, v, prm, buf, ibuf, out = si.q, si.v, si.prm, si.buf, si.ibuf, si.out
     n = q.size
     tol, maxit = prm[P_TOL], int(prm[P_MAXIT])
@@ -1224,13 +1233,13 @@ def _work(si, u_k, u_l, x, p, wi, wf, dt, r):
             if wi[W_TRIALS, r] < 12:
                 for k in range(n):
                     v[k] = vacc[k] + step * dv[k]
-                return _await(si, x, wi, r, _TRIAL, False)
+                return _RESIDUAL, _TRIAL, False
         if step < 1.0:
             wi[W_SEARCHED, r] = wi[W_PASS, r]
         wf[W_NORM2, r], wf[W_RMAX, r], wf[W_PFRIC, r] = norm2, rmax, x.res[L_PFRIC, r]
         if rmax > tol and stepper._stick_slow_nodes(v, ibuf, prm, n):
             wi[W_PASS, r] = 0
-            return _await(si, x, wi, r, _POINT, True)
+            return _RESIDUAL, _POINT, True
         if (
             rmax > tol
             and wi[W_PASS, r] < maxit
@@ -1242,18 +1251,18 @@ def _work(si, u_k, u_l, x, p, wi, wf, dt, r):
     elif phase == _SOLVE:
         if stepper._stick_reversing_nodes(v, dv, 1.0, buf[B_V0], ibuf, n):
             wi[W_PASS, r] = 0
-            return _await(si, x, wi, r, _POINT, True)
+            return _RESIDUAL, _POINT, True
         renew = wf[W_RMAX, r] * wf[W_RMAX, r] > tol and wi[W_SEARCHED, r] != wi[W_PASS, r] - 1
         wf[W_LS, r], wi[W_TRIALS, r], wi[W_RENEW, r] = 1.0, 0, renew
         for k in range(n):
             v[k] = vacc[k] + 1.0 * dv[k]
-        return _await(si, x, wi, r, _TRIAL, renew)
+        return _RESIDUAL, _TRIAL, renew
     while True:
         phase = wi[W_PHASE, r]
         if phase == _STEP:
             if wi[W_STEP, r] == wi[W_NSTEPS, r]:
                 stepper.ledger_energies(si)
-                return _ENDED
+                return _ENDED, _STEP, False
             wi[W_NITER, r], wi[W_SUB, r] = 0, 0
             for k in range(W_RESID, N_WORK):
                 wf[k, r] = 0.0
@@ -1268,7 +1277,7 @@ def _work(si, u_k, u_l, x, p, wi, wf, dt, r):
             stepper._be_start(si, MEDIUM_GROUND, 1.0)
             _start_solve(si, x, p, r)
             wi[W_IT, r], wi[W_PASS, r], wi[W_SEARCHED, r] = 0, 0, -1
-            return _await(si, x, wi, r, _POINT, True)
+            return _RESIDUAL, _POINT, True
         elif phase == _TOP:
             if wf[W_RMAX, r] <= tol:
                 _store(si, x, r, False)
@@ -1276,7 +1285,7 @@ def _work(si, u_k, u_l, x, p, wi, wf, dt, r):
                     wi[W_STATUS, r], wi[W_PHASE, r] = OK, _SUB_END
                     continue
                 wi[W_PASS, r] = 0
-                return _await(si, x, wi, r, _POINT, True)
+                return _RESIDUAL, _POINT, True
             if wi[W_PASS, r] == maxit or not math.isfinite(wf[W_NORM2, r]):
                 wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
                 continue
@@ -1284,7 +1293,7 @@ def _work(si, u_k, u_l, x, p, wi, wf, dt, r):
             wi[W_PASS, r] += 1
             out[O_NFACTOR] += 1.0
             wi[W_PHASE, r] = _SOLVE
-            return _NEWTON_STEP
+            return _NEWTON_STEP, _SOLVE, False
         elif phase == _SUB_END:
             _store(si, x, r, True)
             _, ed, efr, ea = stepper.implicit_energies(si, u_k, dt, wf[W_PACT0, r], 0.0, wf[W_PFRIC, r])
@@ -1311,5 +1320,5 @@ def _work(si, u_k, u_l, x, p, wi, wf, dt, r):
             wi[W_STEP, r] += 1
             if status != OK:
                 stepper.ledger_energies(si)
-                return _ENDED
+                return _ENDED, _STEP, False
             wi[W_PHASE, r] = _STEP
