@@ -510,3 +510,48 @@ def test_worms_in_lanes_on_two_threads_are_worms_robot_by_robot():
 
     status = _blocks_against_robot_step(worms, actions, threads=2)
     assert (status == L.OK).all()
+
+
+@njit
+def _crawl(s, uk, ul, nsteps, status):
+    s = SimArrays(*s)
+    x = lanes.allocate(s.q.shape[1])
+    p = np.empty((lanes.N_LANE_PRM, LANES))
+    wi = np.empty((lanes.N_WORK_INT, LANES), dtype=np.int64)
+    wf = np.empty((lanes.N_WORK, LANES))
+    lanes.crawl(s, uk, ul, np.arange(s.q.shape[0]), nsteps, status, x, p, wi, wf)
+
+
+def test_worms_whose_jobs_end_before_their_first_residual_hand_their_lanes_on():
+    """Rest lengths driven below zero in the first sub-step: the job ends before any residual.
+
+    Three of 20 worms (two in the first sixteen lanes, one taken later) get rates that no rest
+    length survives; the lanes go on to the next worms. Every worm ends as ``stepper.simulate``
+    leaves it, bit for bit (but Newton's scratch, as :func:`_state`, and the pivots), with its status.
+    """
+    n = LANES + 4
+    venv = SoftVectorEnv("SoftWorm-v0", n, num_threads=1, max_episode_steps=None)
+    venv.reset(seed=3)
+    sim = venv.batch.sim
+    rng = np.random.default_rng(3)
+    uk = rng.uniform(-1.0, 1.0, (n, sim.kbar.shape[1]))
+    ul = rng.uniform(-0.05, 0.05, (n, sim.lbar.shape[1]))
+    bad = [0, 5, 17]
+    ul[bad] = -1e3  # m/s: through the actuators' lag, minus metres in one sub-step
+    nsteps = np.full(n, 2)
+    refs = [L.sim_arrays_over(sim.f[i].copy(), sim.ibuf[i].copy()) for i in range(n)]
+    want = [stepper.simulate(tuple(refs[i]), uk[i], ul[i], 2) for i in range(n)]
+    assert [i for i in range(n) if want[i] != L.OK] == bad
+    assert all(want[i] == L.BAD_REST_LENGTH for i in bad)
+    status = np.full(n, -1)
+    _crawl(tuple(sim), uk, ul, nsteps, status)
+    assert status.tolist() == want
+    rows = [k for k in range(L.N_BUF) if k not in (L.B_VACC, L.B_DV, *lanes.STAGE_ROWS)]
+    for i in range(n):
+        got, ref = L.sim_arrays_over(sim.f[i], sim.ibuf[i]), refs[i]
+        for a, b in zip(
+            (got.q, got.v, got.kbar, got.lbar, got.prm, got.out, got.buf[rows], got.ibuf[L.I_FRICTION :]),
+            (ref.q, ref.v, ref.kbar, ref.lbar, ref.prm, ref.out, ref.buf[rows], ref.ibuf[L.I_FRICTION :]),
+            strict=True,
+        ):
+            assert np.array_equal(_bits(a), _bits(b)), i
