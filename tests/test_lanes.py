@@ -339,12 +339,15 @@ def _blocks_against_robot_step(make, actions: np.ndarray, threads: int, any_nan:
     return status_a
 
 
+_KEPT_ROWS = [k for k in range(L.N_BUF) if k not in (L.B_VACC, L.B_DV, *lanes.STAGE_ROWS)]
+"""``buf``'s rows that a step's result holds: all but its work (Newton's trial and step, ``lanes.STAGE_ROWS``)."""
+
+
 def _state(sim, task) -> list[np.ndarray]:
-    """Copies of a batch's arrays, all but the stages' work (Newton's band, trial and step, ``lanes.STAGE_ROWS``)."""
+    """Copies of a batch's arrays, all but the stages' work (Newton's band and ``buf``'s rows not in ``_KEPT_ROWS``)."""
     s = L.sim_arrays_over(sim.f.copy(), sim.ibuf)
-    kept_rows = [k for k in range(L.N_BUF) if k not in (L.B_VACC, L.B_DV, *lanes.STAGE_ROWS)]
     return [
-        np.array(a) for a in (s.q, s.v, s.kbar, s.lbar, s.prm, s.out, s.buf[:, kept_rows], task.f, task.obs)
+        np.array(a) for a in (s.q, s.v, s.kbar, s.lbar, s.prm, s.out, s.buf[:, _KEPT_ROWS], task.f, task.obs)
     ]
 
 
@@ -546,12 +549,29 @@ def test_worms_whose_jobs_end_before_their_first_residual_hand_their_lanes_on():
     status = np.full(n, -1)
     _crawl(tuple(sim), uk, ul, nsteps, status)
     assert status.tolist() == want
-    rows = [k for k in range(L.N_BUF) if k not in (L.B_VACC, L.B_DV, *lanes.STAGE_ROWS)]
     for i in range(n):
         got, ref = L.sim_arrays_over(sim.f[i], sim.ibuf[i]), refs[i]
         for a, b in zip(
-            (got.q, got.v, got.kbar, got.lbar, got.prm, got.out, got.buf[rows], got.ibuf[L.I_FRICTION :]),
-            (ref.q, ref.v, ref.kbar, ref.lbar, ref.prm, ref.out, ref.buf[rows], ref.ibuf[L.I_FRICTION :]),
+            (
+                got.q,
+                got.v,
+                got.kbar,
+                got.lbar,
+                got.prm,
+                got.out,
+                got.buf[_KEPT_ROWS],
+                got.ibuf[L.I_FRICTION :],
+            ),
+            (
+                ref.q,
+                ref.v,
+                ref.kbar,
+                ref.lbar,
+                ref.prm,
+                ref.out,
+                ref.buf[_KEPT_ROWS],
+                ref.ibuf[L.I_FRICTION :],
+            ),
             strict=True,
         ):
             assert np.array_equal(_bits(a), _bits(b)), i

@@ -1056,19 +1056,10 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
     for r in range(LANES):
         wi[W_ROBOT, r] = -1
         taken = _next_job(s, uk, ul, robots, nsteps, status, taken, wi, r)
-    started = False  # the first pass starts the lanes' jobs, before any residual
     while True:
-        busy = False
-        for r in range(LANES):
-            busy |= wi[W_ROBOT, r] >= 0
-        if not busy:
-            return
-        if started:
-            ground_residual(x, p, dt, x.res)
-        started = True
-        # each lane goes on from its residual; then, if any is at a Newton step, those lanes go
-        # on from band_factor and band_solve on -R, made at once. A lane whose job ends takes
-        # the next robot and starts its job in the same pass
+        # each lane goes on from its residual (the first time, starts its job); then, if any is
+        # at a Newton step, those lanes go on from band_factor and band_solve on -R, made at
+        # once. A lane whose job ends takes the next robot and starts its job in the same pass
         solving = False
         for solved in (False, True):
             if solved:
@@ -1095,6 +1086,12 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
                         break
                     si = layout.sim_views(s.f[i], s.ibuf[i])
                 solving |= awaits == _NEWTON_STEP
+        busy = False
+        for r in range(LANES):
+            busy |= wi[W_ROBOT, r] >= 0
+        if not busy:
+            return
+        ground_residual(x, p, dt, x.res)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
