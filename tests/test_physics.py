@@ -32,7 +32,9 @@ def bent_simulator(N: int, medium: str = "none", damping: float = 0.0, seed: int
 
 
 def energy_at(sim: Simulator, q: np.ndarray) -> float:
-    return forces.elastic_energy(q, sim.arrays.kbar, sim.arrays.lbar, sim.arrays.prm)
+    geo = np.empty((2, q.size))
+    geometry.edge_geometry(q, geo)
+    return forces.elastic_energy(geo, sim.arrays.kbar, sim.arrays.lbar, sim.arrays.prm)
 
 
 def total_energy(sim: Simulator) -> float:

@@ -27,7 +27,6 @@ from soft_snake_gym.physics.geometry import (
     edge_frame_at,
     edge_geometry,
     node_tangent,
-    turning,
     turning_at,
     turning_rate,
 )
@@ -63,18 +62,20 @@ def added_mass_coefficient(prm):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def elastic_energy(q, kbar, lbar, prm):
-    """Stretching plus bending energy ``E_s + E_b`` (docs/model.md §3) [J]."""
-    N = q.size // 2
+def elastic_energy(geo, kbar, lbar, prm):
+    """Stretching plus bending energy ``E_s + E_b`` (docs/model.md §3) [J].
+
+    ``geo`` is the edge geometry of the positions (:func:`~soft_snake_gym.physics.geometry.
+    edge_geometry`); bit for bit the energy computed from them.
+    """
+    N = lbar.size + 1
     EA, EI = prm[P_EA], prm[P_EI]
     e = 0.0
     for k in range(N - 1):
-        ex = q[2 * k + 2] - q[2 * k]
-        ey = q[2 * k + 3] - q[2 * k + 1]
-        s = math.sqrt(ex * ex + ey * ey) / lbar[k] - 1.0  # a square root, not libm's slower hypot
+        s = geo[0, 2 * k] / lbar[k] - 1.0
         e += 0.5 * EA * s * s * lbar[k]
     for j in range(1, N - 1):
-        dk = turning(q, j)[0] - kbar[j - 1]
+        dk = turning_at(geo, j)[0] - kbar[j - 1]
         e += 0.5 * EI / (0.5 * (lbar[j - 1] + lbar[j])) * dk * dk
     return e
 
@@ -153,9 +154,15 @@ def assemble(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
     root and divisions are done once, not four times. Returns the power lost to drag
     ``-sum F_D . v_edge`` [W].
     """
+    edge_geometry(q, geo)
+    return assemble_at(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def assemble_at(q, v, kbar, lbar, prm, F, J, cx, cv, jac, water, geo):
+    """:func:`assemble` where ``geo`` already holds the edge geometry of ``q``."""
     N = q.size // 2
     EA, EI, d, db = prm[P_EA], prm[P_EI], prm[P_DSTRETCH], prm[P_DBEND]
-    edge_geometry(q, geo)
     # stretching (docs/model.md §3): force on x[k+1] is -EA (|e|/lbar - 1) t
     for k in range(N - 1):
         l, tx, ty = geo[0, 2 * k], geo[1, 2 * k], geo[1, 2 * k + 1]

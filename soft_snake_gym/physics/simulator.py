@@ -458,7 +458,9 @@ class Simulator:
     def elastic_energy(self) -> float:
         """Stretching plus bending energy [J]."""
         a = self.arrays
-        return float(forces.elastic_energy(a.q, a.kbar, a.lbar, a.prm))
+        geo = np.empty((2, a.q.size))
+        geometry.edge_geometry(a.q, geo)
+        return float(forces.elastic_energy(geo, a.kbar, a.lbar, a.prm))
 
     def kinetic_energy(self) -> float:
         """Kinetic energy of the nodes (not of the entrained water) [J]."""

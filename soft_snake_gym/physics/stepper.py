@@ -20,6 +20,7 @@ from soft_snake_gym.physics.forces import (
     actuator_power,
     added_mass,
     assemble,
+    assemble_at,
     damping_power,
     elastic_energy,
     fluid_kinetic_energy,
@@ -335,7 +336,11 @@ def _be_substep(s, dt, medium, extrapolate):
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def _be_start(s, medium, extrapolate):
-    """Record the start of an implicit step in ``buf`` and make the first guess (contacts, velocity)."""
+    """Record the start of an implicit step in ``buf`` and make the first guess (contacts, velocity).
+
+    On the ground ``buf[B_GEO]`` must hold the edge geometry of ``q``, as :func:`move_rest_shape`
+    leaves it (backward Euler is the only method there).
+    """
     q, v, prm, buf, J, ibuf = s.q, s.v, s.prm, s.buf, s.J, s.ibuf
     n = q.size
     q0, v0 = buf[B_Q0], buf[B_V0]
@@ -357,7 +362,8 @@ def _be_start(s, medium, extrapolate):
             F, m, fext = buf[B_F], buf[B_M], buf[B_FEXT]
             for i in range(n):
                 F[i] = fext[i]
-            assemble(q, v, s.kbar, s.lbar, prm, F, J, 0.0, 0.0, False, False, buf[B_GEO : B_GEO + 2])
+            geo = buf[B_GEO : B_GEO + 2]  # of this q: move_rest_shape made it, as every caller on the ground
+            assemble_at(q, v, s.kbar, s.lbar, prm, F, J, 0.0, 0.0, False, False, geo)
             for i in range(n // 2):
                 r0, r1 = 2 * i, 2 * i + 1
                 hold = prm[P_MUS] * m[r0] * prm[P_G]
@@ -561,7 +567,9 @@ def ledger_energies(s):
     for i in range(q.size):
         ke += 0.5 * m[i] * v[i] * v[i]
     out[O_E_KIN] = ke
-    out[O_E_ELASTIC] = elastic_energy(q, kbar, lbar, prm)
+    geo = buf[B_GEO : B_GEO + 2]
+    edge_geometry(q, geo)  # one square root an edge: the energy from q took about three
+    out[O_E_ELASTIC] = elastic_energy(geo, kbar, lbar, prm)
     out[O_T_FLUID] = fluid_kinetic_energy(q, v, prm) if int(prm[P_MEDIUM]) == MEDIUM_WATER else 0.0
     ledger(out)
 
