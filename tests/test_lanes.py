@@ -471,7 +471,7 @@ def test_a_worm_lane_whose_factors_would_exchange_rows_takes_band_factors_step()
 
 @njit
 def _newton_step(si, x, r):
-    return lanes._newton_step(si, x, 0.01, r)
+    return lanes._newton_step(si, x, 0.01, r, False)
 
 
 def test_worms_that_fail_inside_the_lanes_end_as_robot_step_leaves_them():

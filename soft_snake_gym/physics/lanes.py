@@ -133,6 +133,9 @@ N_LANE_PRM = 13
 L_NORM2, L_RMAX, L_PFLUID = range(3)
 L_PFRIC = L_PFLUID
 N_LANE_RES = 3
+SCALAR_TAIL = 6
+"""Busy lanes, once no robot is left to take, at or below which :func:`crawl` finishes their jobs one
+by one in scalar code: a round costs the block the same for one busy lane as for sixteen."""
 CHORD_STEPS = 3
 """The most chord steps a stage takes in the block: a lane that would take more is solved alone.
 
@@ -929,12 +932,9 @@ def newton(s, first, go, x, p, dt, result):
         if not on[r]:
             put(s, i, x, r, x.guess)
             status, it, rmax, pf, pfr = stepper._be_newton(si, dt, MEDIUM_WATER)
-            for k in range(n2):  # what _be_newton changed
-                x.q[_ix(k, r)] = si.q[k]
+            _load(si, x, r)  # what _be_newton changed: its last residual's, and the velocity
+            for k in range(n2):
                 x.v[_ix(k, r)] = si.v[k]
-                x.F[_ix(k, r)] = si.buf[B_F, k]
-                x.R[_ix(k, r)] = si.buf[B_R, k]
-                x.A[_ix(k, r)] = si.buf[B_A, k]
         else:
             it = done[r] - 1
             rmax, pf = (res[L_RMAX, r], res[L_PFLUID, r]) if it == 0 else (res1[L_RMAX, r], res1[L_PFLUID, r])
@@ -1043,7 +1043,9 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
     at the iterate a line search accepted, the trial's serves (the same bits): it is counted in
     ``out[O_NJAC]`` as ``_be_newton`` counts it, and not computed. The lanes at a Newton step
     factor and solve at once (:func:`factor`, :func:`solve`); a lane whose factors would
-    exchange rows takes ``band_factor``'s own step (:func:`_newton_step`). Bit for bit, but for
+    exchange rows takes ``band_factor``'s own step (:func:`_newton_step`). Once no robot is left
+    to take and at most :data:`SCALAR_TAIL` lanes are busy, their jobs end one by one in scalar
+    code (:func:`_finish_alone`), where a round would cost the whole block. Bit for bit, but for
     the sign and payload of a NaN, which in vector code depend on the order in which an
     instruction takes its operands: a robot whose state is not finite fails as alone, its
     diagnostics NaN as alone.
@@ -1074,7 +1076,7 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
                 if i < 0 or (solved and wi[W_PHASE, r] != _SOLVE):
                     continue
                 si = layout.sim_views(s.f[i], s.ibuf[i])
-                if solved and not _newton_step(si, x, dt, r):
+                if solved and not _newton_step(si, x, dt, r, False):
                     wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
                 while True:
                     awaits = _work(si, uk[i], ul[i], x, p, wi, wf, dt, r)
@@ -1086,32 +1088,65 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
                         break
                     si = layout.sim_views(s.f[i], s.ibuf[i])
                 solving |= awaits == _NEWTON_STEP
-        busy = False
+        busy = 0
         for r in range(LANES):
-            busy |= wi[W_ROBOT, r] >= 0
-        if not busy:
+            busy += wi[W_ROBOT, r] >= 0
+        if busy == 0:
+            return
+        if taken == robots.size and busy <= SCALAR_TAIL:
+            for r in range(LANES):
+                if wi[W_ROBOT, r] >= 0:
+                    _finish_alone(s, uk, ul, robots, nsteps, status, x, p, wi, wf, dt, r)
             return
         ground_residual(x, p, dt, x.res)
 
 
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _finish_alone(s, uk, ul, robots, nsteps, status, x, p, wi, wf, dt, r):
+    """Lane ``r``'s job, awaiting a residual, run to its end in scalar code; no robot is left to take.
+
+    Each residual is the robot's own (``stepper._be_residual`` with its Jacobian, the lane's
+    bits) and each Newton step ``band_factor``'s on that Jacobian, for :func:`_work`'s phases as
+    the lanes serve them; the residual's ``q``, ``F``, ``R`` and ``A`` go into the lane, where
+    :func:`_store` reads them.
+    """
+    i = wi[W_ROBOT, r]
+    si = layout.sim_views(s.f[i], s.ibuf[i])
+    while True:
+        norm2, rmax, _, p_fric = stepper._be_residual(si, dt, MEDIUM_GROUND, True)
+        si.out[O_NJAC] -= 1.0  # _await counted it
+        x.res[L_NORM2, r], x.res[L_RMAX, r], x.res[L_PFRIC, r] = norm2, rmax, p_fric
+        _load(si, x, r)
+        awaits = _work(si, uk[i], ul[i], x, p, wi, wf, dt, r)
+        if awaits == _NEWTON_STEP:
+            if not _newton_step(si, x, dt, r, True):
+                wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
+            awaits = _work(si, uk[i], ul[i], x, p, wi, wf, dt, r)
+        if awaits == _ENDED:
+            _next_job(s, uk, ul, robots, nsteps, status, robots.size, wi, r)
+            return
+
+
 @njit(cache=True, inline="always", error_model="numpy")
-def _newton_step(si, x, dt, r):
+def _newton_step(si, x, dt, r, alone):
     """``_be_newton``'s factorization and solve for lane ``r``: ``vacc = v`` and ``dv`` in the robot's ``buf``.
 
     From the lane's factors where they kept every row, else by ``band_factor`` on the robot's
-    band, assembled again at the same iterate (the same bits; not counted). False where
-    ``band_factor`` fails.
+    band, assembled again at the same iterate (the same bits; not counted), or, if ``alone``
+    (:func:`_finish_alone`), as the robot's own residual left it. False where ``band_factor``
+    fails.
     """
     v, buf, ibuf = si.v, si.buf, si.ibuf
     n = v.size
     vacc, dv = buf[B_VACC], buf[B_DV]
-    if x.kept[r]:
+    if x.kept[r] and not alone:
         for k in range(n):
             vacc[k] = v[k]
             dv[k] = x.dv[_ix(k, r)]
         return True
-    stepper._be_residual(si, dt, MEDIUM_GROUND, True)
-    si.out[O_NJAC] -= 1.0
+    if not alone:
+        stepper._be_residual(si, dt, MEDIUM_GROUND, True)
+        si.out[O_NJAC] -= 1.0
     piv = ibuf[I_PIV]
     if not banded.band_factor(si.J, piv, n, PIVOT_THRESHOLD):
         return False
@@ -1172,6 +1207,17 @@ def _store(si, x, r, whole):
             si.q[k] = x.q[_ix(k, r)]
             buf[B_R, k] = x.R[_ix(k, r)]
             buf[B_A, k] = x.A[_ix(k, r)]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _load(si, x, r):
+    """What ``_be_residual`` wrote into a robot's arrays, ``q``, ``F``, ``R`` and ``A``, into lane ``r``: :func:`_store`'s inverse."""
+    buf = si.buf
+    for k in range(si.q.size):
+        x.q[_ix(k, r)] = si.q[k]
+        x.F[_ix(k, r)] = buf[B_F, k]
+        x.R[_ix(k, r)] = buf[B_R, k]
+        x.A[_ix(k, r)] = buf[B_A, k]
 
 
 @njit(cache=True, inline="always", error_model="numpy")
