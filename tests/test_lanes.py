@@ -550,28 +550,11 @@ def test_worms_whose_jobs_end_before_their_first_residual_hand_their_lanes_on():
     _crawl(tuple(sim), uk, ul, nsteps, status)
     assert status.tolist() == want
     for i in range(n):
-        got, ref = L.sim_arrays_over(sim.f[i], sim.ibuf[i]), refs[i]
-        for a, b in zip(
-            (
-                got.q,
-                got.v,
-                got.kbar,
-                got.lbar,
-                got.prm,
-                got.out,
-                got.buf[_KEPT_ROWS],
-                got.ibuf[L.I_FRICTION :],
-            ),
-            (
-                ref.q,
-                ref.v,
-                ref.kbar,
-                ref.lbar,
-                ref.prm,
-                ref.out,
-                ref.buf[_KEPT_ROWS],
-                ref.ibuf[L.I_FRICTION :],
-            ),
-            strict=True,
-        ):
+        got = L.sim_arrays_over(sim.f[i], sim.ibuf[i])
+        for a, b in zip(_robot_result(got), _robot_result(refs[i]), strict=True):
             assert np.array_equal(_bits(a), _bits(b)), i
+
+
+def _robot_result(a: SimArrays) -> tuple[np.ndarray, ...]:
+    """One robot's arrays that a step's result holds: all but Newton's scratch (``_KEPT_ROWS``) and the pivots."""
+    return (a.q, a.v, a.kbar, a.lbar, a.prm, a.out, a.buf[_KEPT_ROWS], a.ibuf[L.I_FRICTION :])
