@@ -216,6 +216,40 @@ def _add_block(J, r, i, j, m00, m01, m10, m11):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _set_block(J, r, i, j, m00, m01, m10, m11):
+    """:func:`_add_block` to a block that no term has reached yet: ``+0 + m``, an add's bits on a zeroed band, without its loads."""
+    row, col = 2 * i, 2 * j - 2 * i + KL
+    J[_jx(row, col, r)] = 0.0 + m00
+    J[_jx(row, col + 1, r)] = 0.0 + m01
+    J[_jx(row + 1, col - 1, r)] = 0.0 + m10
+    J[_jx(row + 1, col, r)] = 0.0 + m11
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _clear_unreached(J, n2):
+    """Zero the entries of every lane's band that :func:`_elastic` does not set, before it writes the Jacobian.
+
+    :func:`_elastic` sets each entry that a term reaches with its first term (:func:`_set_block`),
+    which gives the bits of an add to a zeroed band, so only the entries it leaves need a zero:
+    node 0's diagonal block, whose first term is an add; each node's two entries five places off
+    the diagonal (row ``2i`` five columns left, row ``2i + 1`` five right), which no block of
+    the stencil reaches and the factorization updates; and the first and last rows' entries
+    outside the matrix. The band is then, entry for entry, what zeroing it whole and adding
+    gives, whatever it held (the last round's factors); ``J[:] = 0`` was 15 % of
+    :func:`ground_residual`.
+    """
+    for r in range(LANES):
+        J[_jx(0, KL, r)] = J[_jx(0, KL + 1, r)] = J[_jx(1, KL - 1, r)] = J[_jx(1, KL, r)] = 0.0
+    for i in range(n2 // 2):
+        for r in range(LANES):
+            J[_jx(2 * i, 0, r)] = J[_jx(2 * i + 1, 2 * KL, r)] = 0.0
+    for k in range(KL):
+        for c in range(KL - k):
+            for r in range(LANES):
+                J[_jx(k, c, r)] = J[_jx(n2 - 1 - k, 2 * KL - c, r)] = 0.0
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _momentum_block(J, r, a, b, sa, sb, nx, ny, parts):
     """``fluid_momentum``'s block (a, b) of one edge for lane r (sa, sb: -1 or 1)."""
     m00, m01, m10, m11 = forces.momentum_block(sa, sb, nx, ny, parts)
@@ -305,7 +339,11 @@ def _start_residual(x, dt):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _elastic(x, p, cx, cv, jac):
-    """``forces.assemble``'s stretching and bending, with their damping, for every lane (``E`` of ``q`` made)."""
+    """``forces.assemble``'s stretching and bending, with their damping, for every lane (``E`` of ``q`` made).
+
+    With ``jac`` the Jacobian's first terms: each band entry that a term reaches is set by its
+    first (:func:`_set_block`) and added to by the rest, after :func:`_clear_unreached`.
+    """
     v, kbar, lbar, F, J, E = x.v, x.kbar, x.lbar, x.F, x.J, x.E
     n2 = v.size // LANES
     for k in range(n2 // 2 - 1):  # stretching
@@ -326,10 +364,10 @@ def _elastic(x, p, cx, cv, jac):
                 s00 = cx * (a1 * tx * tx + a2 * (1.0 - tx * tx)) + cv * d * tx * tx
                 s01 = cx * (a1 - a2) * tx * ty + cv * d * tx * ty
                 s11 = cx * (a1 * ty * ty + a2 * (1.0 - ty * ty)) + cv * d * ty * ty
-                _add_block(J, r, k, k, -s00, -s01, -s01, -s11)
-                _add_block(J, r, k, k + 1, s00, s01, s01, s11)
-                _add_block(J, r, k + 1, k, s00, s01, s01, s11)
-                _add_block(J, r, k + 1, k + 1, -s00, -s01, -s01, -s11)
+                _add_block(J, r, k, k, -s00, -s01, -s01, -s11)  # the others' first terms
+                _set_block(J, r, k, k + 1, s00, s01, s01, s11)
+                _set_block(J, r, k + 1, k, s00, s01, s01, s11)
+                _set_block(J, r, k + 1, k + 1, -s00, -s01, -s01, -s11)
                 px, py = cx * d * (dvx - ldot * tx) * il, cx * d * (dvy - ldot * ty) * il
                 t00, t01, t10, t11 = tx * px, tx * py, ty * px, ty * py
                 _add_block(J, r, k, k, -t00, -t01, -t10, -t11)
@@ -370,7 +408,10 @@ def _elastic(x, p, cx, cv, jac):
                 blocks = forces.bending_blocks(beta, g, u, (ha00, ha01, ha11), (hb00, hb01, hb11))
                 for k in range(9):
                     m00, m01, m10, m11 = blocks[k]
-                    _add_block(J, r, j - 1 + k // 3, j - 1 + k % 3, m00, m01, m10, m11)
+                    if k == 2 or k == 6:  # nodes two apart: the first term
+                        _set_block(J, r, j - 1 + k // 3, j - 1 + k % 3, m00, m01, m10, m11)
+                    else:
+                        _add_block(J, r, j - 1 + k // 3, j - 1 + k % 3, m00, m01, m10, m11)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -402,7 +443,7 @@ def _residual(x, p, dt, jac, res):
     cx, cv = -dt * dt, -dt
     _start_residual(x, dt)
     if jac:
-        J[:] = 0.0
+        _clear_unreached(J, n2)
     _elastic(x, p, cx, cv, jac)
     for r in range(LANES):
         res[L_PFLUID, r] = 0.0
@@ -965,7 +1006,7 @@ def ground_residual(x, p, dt, res):
     n2 = v.size // LANES
     cx, cv = -dt * dt, -dt
     _start_residual(x, dt)
-    J[:] = 0.0
+    _clear_unreached(J, n2)
     _elastic(x, p, cx, cv, True)
     for k in range(R.size):
         R[k] = m[k] * A[k] - dt * F[k]
