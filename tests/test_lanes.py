@@ -72,6 +72,7 @@ def _taken(s, uk):
     ``lanes.stage_start``: here the stages were started robot by robot.
     """
     x = lanes.allocate(s.q.shape[1])
+    x.J[:] = np.nan  # the band as no residual leaves it: one with its Jacobian writes every entry
     p = np.empty((lanes.N_LANE_PRM, LANES))
     lanes.take(s, uk, 0, x, p)
     for r in range(LANES):
@@ -86,7 +87,6 @@ def _taken(s, uk):
 def _block_residuals(s, uk, dt, jac, res):
     s = SimArrays(*s)
     x, p = _taken(s, uk)
-    x.J[:] = np.nan  # the band as no residual leaves it: with its Jacobian, the residual writes every entry
     lanes.residual(x, p, dt, jac, res)
     return x
 
@@ -411,7 +411,7 @@ def _ground_block(s, dt):
         si = L.sim_views(s.f[r], s.ibuf[r])
         lanes._start_solve(si, x, p, r)
         lanes._await(si, x, wi, r, 0, True)
-    x.J[:] = np.nan  # as in _block_residuals: the residual writes every entry of the band
+    x.J[:] = np.nan  # as in _taken: the residual writes every entry of the band
     lanes.ground_residual(x, p, dt, x.res)
     return x
 
