@@ -75,7 +75,10 @@ B_QPREV = 13
 B_GEO = 14
 # the reciprocals of the masses in B_M, set with them: Newton's max-norm |R|/m multiplies
 B_MINV = 16
-N_BUF = 17
+# scratch, on the ground: the velocity each sliding node has slid with since the step began, or
+# since it was released (its first guess): the direction stepper._stick_reversing_nodes tests against
+B_VSLIDE = 17
+N_BUF = 18
 I_PIV, I_ORDER, I_FRICTION, I_SWITCHES = 0, 1, 2, 3
 N_IBUF = 4
 SLIDING, STUCK = 0, 1

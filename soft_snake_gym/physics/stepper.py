@@ -47,6 +47,7 @@ from soft_snake_gym.physics.layout import (
     B_R,
     B_V0,
     B_VACC,
+    B_VSLIDE,
     B_VSTEP,
     BAD_REST_LENGTH,
     I_FRICTION,
@@ -254,24 +255,26 @@ def _stick_slow_nodes(v, ibuf, prm, n):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _stick_reversing_nodes(v, dv, ahead, v0, ibuf, n):
-    """Stick every node sliding since the step began that ``v + ahead dv`` turns back; True if any did.
+def _stick_reversing_nodes(v, dv, ahead, vslide, ibuf, n):
+    """Stick every sliding node that ``v + ahead dv`` turns against the way it has slid; True if any did.
 
     Kinetic friction brakes a sliding node; it cannot push it back. A node whose velocity
-    would end the step against its start velocity ``v0`` passed through rest within the step,
-    where the law holds it unless the force exceeds ``mu_s F_N``: it is held at rest, and
-    :func:`_update_contacts` releases it at the end of the pass if its holding force exceeds
-    ``mu_s F_N``. Only nodes that have not changed in this step are tested (a released node
-    may move against ``v0``). ``ahead`` is 1 to test a Newton update ``dv`` before it is
-    taken, 0 to test the converged velocity.
+    would end the step against ``vslide`` (its velocity at the start of the step, or the
+    first guess it was released with: ``buf[B_VSLIDE]``) passed through rest within the
+    step, where the law holds it unless the force exceeds ``mu_s F_N``: it is held at rest,
+    and :func:`_update_contacts` releases it at the end of the pass if its holding force
+    exceeds ``mu_s F_N``, along its new push. Released nodes are tested too: a node
+    released with too weak a push otherwise swings about rest, friction flipping at every
+    Newton iterate, until a line search brings it below ``V_tol``. ``ahead`` is 1 to test a
+    Newton update ``dv`` before it is taken, 0 to test the converged velocity.
     """
     state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
     stuck_any = False
     for i in range(n // 2):
         r0, r1 = 2 * i, 2 * i + 1
         # one branch a node, on all three tests at once (&, not and: three were mispredicted)
-        turns = (v[r0] + ahead * dv[r0]) * v0[r0] + (v[r1] + ahead * dv[r1]) * v0[r1] < 0.0
-        if turns & (state[i] == SLIDING) & (switches[i] == 0):
+        turns = (v[r0] + ahead * dv[r0]) * vslide[r0] + (v[r1] + ahead * dv[r1]) * vslide[r1] < 0.0
+        if turns & (state[i] == SLIDING) & (switches[i] < MAX_SWITCHES):
             state[i] = STUCK
             switches[i] += 1
             v[r0] = 0.0
@@ -281,12 +284,27 @@ def _stick_reversing_nodes(v, dv, ahead, v0, ibuf, n):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
+def _slide_on(v, dv, ibuf, n):
+    """The nodes still sliding take the Newton update ``dv`` that :func:`_stick_reversing_nodes` cut short.
+
+    The update was solved with the newly held nodes sliding; the others' part of it is still a
+    better start for the pass than the iterate it came from (under random actions a worm step
+    took 4.07 factorizations with it, 4.40 without).
+    """
+    state = ibuf[I_FRICTION]
+    for i in range(n // 2):
+        if state[i] == SLIDING:
+            v[2 * i] += dv[2 * i]
+            v[2 * i + 1] += dv[2 * i + 1]
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _update_contacts(v, buf, ibuf, prm, dt, n):
     """Make stick-slip consistent with the end of a converged step (docs/model.md §5).
 
     True if a node changed and the step must be solved again.
 
-    Sliding nodes that end slower than ``V_tol``, or against their start velocity
+    Sliding nodes that end slower than ``V_tol``, or against the way they slide
     (:func:`_stick_reversing_nodes`), stick. Otherwise every stuck node whose
     holding force ``f = -m v0/dt - F`` (``F``: every other force, at the end of the step)
     exceeds ``mu_s F_N`` is released to slide, with a first guess along its push (releasing
@@ -294,7 +312,7 @@ def _update_contacts(v, buf, ibuf, prm, dt, n):
     released too eagerly ends slow and sticks again in the next pass. Each node changes at
     most ``MAX_SWITCHES`` times per step, so the passes end.
     """
-    if _stick_slow_nodes(v, ibuf, prm, n) | _stick_reversing_nodes(v, v, 0.0, buf[B_V0], ibuf, n):
+    if _stick_slow_nodes(v, ibuf, prm, n) | _stick_reversing_nodes(v, v, 0.0, buf[B_VSLIDE], ibuf, n):
         return True
     F, m, v0 = buf[B_F], buf[B_M], buf[B_V0]
     state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
@@ -307,19 +325,19 @@ def _update_contacts(v, buf, ibuf, prm, dt, n):
         hold = prm[P_MUS] * m[2 * i] * prm[P_G]
         if fx * fx + fy * fy <= hold * hold:
             continue
-        _release(v, state, i, -fx, -fy, prm[P_VTOL])
+        _release(v, buf[B_VSLIDE], state, i, -fx, -fy, prm[P_VTOL])
         switches[i] += 1
         released = True
     return released
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _release(v, state, i, px, py, vtol):
-    """Let node i slide, with a first guess just above the sticking speed along the push (px, py)."""
+def _release(v, vslide, state, i, px, py, vtol):
+    """Let node i slide, with a first guess just above the sticking speed along the push (px, py), kept in ``vslide``."""
     state[i] = SLIDING
     p = math.hypot(px, py)
-    v[2 * i] = 2.0 * vtol * px / p
-    v[2 * i + 1] = 2.0 * vtol * py / p
+    v[2 * i] = vslide[2 * i] = 2.0 * vtol * px / p
+    v[2 * i + 1] = vslide[2 * i + 1] = 2.0 * vtol * py / p
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -350,10 +368,10 @@ def _be_start(s, medium, extrapolate):
         # mu_s F_N slides, as _update_contacts would release it after a whole contact pass
         # (halves the Newton iterations under random actions); _update_contacts then makes
         # the contacts consistent with the end of the step
-        state, switches = ibuf[I_FRICTION], ibuf[I_SWITCHES]
+        state, switches, vslide = ibuf[I_FRICTION], ibuf[I_SWITCHES], buf[B_VSLIDE]
         for i in range(n):
             q0[i] = q[i]
-            v0[i] = v[i]
+            v0[i] = vslide[i] = v[i]
         stuck_any = False
         for i in range(n // 2):
             switches[i] = 0
@@ -368,7 +386,7 @@ def _be_start(s, medium, extrapolate):
                 r0, r1 = 2 * i, 2 * i + 1
                 hold = prm[P_MUS] * m[r0] * prm[P_G]
                 if state[i] == STUCK and F[r0] * F[r0] + F[r1] * F[r1] > hold * hold:
-                    _release(v, state, i, F[r0], F[r1], prm[P_VTOL])
+                    _release(v, vslide, state, i, F[r0], F[r1], prm[P_VTOL])
     else:
         # predictor: extrapolate the velocity from the last step (v0 still holds its start;
         # set_state makes it the current velocity, so a fresh state starts with v)
@@ -454,7 +472,8 @@ def _be_newton(s, dt, medium):
             vacc[i] = v[i]
             dv[i] = -R[i]
         band_solve(J, piv, n, dv)
-        if fused and _stick_reversing_nodes(v, dv, 1.0, buf[B_V0], ibuf, n):
+        if fused and _stick_reversing_nodes(v, dv, 1.0, buf[B_VSLIDE], ibuf, n):
+            _slide_on(v, dv, ibuf, n)
             norm2, rmax, p_fluid, p_fric = _be_residual(s, dt, medium, True)
             factored = False
             pass_it = 0

@@ -7,10 +7,10 @@ direction delta_l k)) / 2)``, every edge changing at once.
 
 Measured on the converged contact model (thesis worm, mu_s = 1.15, mu_d = 0.8, 10 s, eps =
 0.3, omega = 2 pi, ``delta_l = 2 pi / 9``, ``direction = +1``: the wave travels from tail to
-head): the pulse (duty 0.6) moves the worm **forward, toward the head**, by 1.29 m open loop
-and 1.28 m under the inching PID (1.32 and 1.31 m at h = 0.01 s, 1.27 and 1.26 m with the
-step divided by 16); the sine wave, which anchors little, by 4 to 9 mm, no more than the
-stick-slip chatter. The pulse is therefore the default. ``direction = -1`` reverses either
+head): the pulse (duty 0.6) moves the worm **forward, toward the head**, by 1.24 m open loop
+and 1.23 m under the inching PID at h = 0.01 s (1.24 and 1.24 m with the step divided by 16;
+2026-12-06); the sine wave, which anchors little, by a few millimetres either way, no more
+than the stick-slip chatter. The pulse is therefore the default. ``direction = -1`` reverses either
 wave; for ``delta_l`` above pi the direction flips (the wave aliases to the other direction).
 """
 
