@@ -202,10 +202,9 @@ def test_a_node_turned_against_its_release_is_held_and_the_rest_take_the_update(
     ibuf[L.I_FRICTION, :3] = [L.SLIDING, L.SLIDING, L.STUCK]
     ibuf[L.I_SWITCHES, :3] = [1, 0, 1]  # node 0 was released in this step
     dv = np.array([-0.005, 0.001, -0.002, 0.0, -0.0, -0.0])  # turns node 0 back; node 1 goes on
-    assert stepper._stick_reversing_nodes(v, dv, 1.0, vslide, ibuf, n)
+    assert stepper._reversal_in_update(v, dv, vslide, ibuf, n)
     assert ibuf[L.I_FRICTION, :3].tolist() == [L.STUCK, L.SLIDING, L.STUCK]
     assert ibuf[L.I_SWITCHES, :3].tolist() == [2, 0, 1]
-    stepper._slide_on(v, dv, ibuf, n)
     np.testing.assert_array_equal(v, [0.0, 0.0, 0.008, 0.0, 0.0, 0.0])
     # a node at its last change slides on: the passes end
     ibuf[L.I_FRICTION, 0], ibuf[L.I_SWITCHES, 0], v[0] = L.SLIDING, L.MAX_SWITCHES, 0.002

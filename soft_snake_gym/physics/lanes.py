@@ -1334,8 +1334,7 @@ def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
             out[O_NJAC] += 1.0  # _be_newton's Jacobian at the accepted iterate: the trial's
         wi[W_PHASE, r] = _TOP
     elif phase == _SOLVE:
-        if stepper._stick_reversing_nodes(v, dv, 1.0, buf[B_VSLIDE], ibuf, n):
-            stepper._slide_on(v, dv, ibuf, n)
+        if stepper._reversal_in_update(v, dv, buf[B_VSLIDE], ibuf, n):
             wi[W_PASS, r] = 0
             return _RESIDUAL, _POINT, True
         renew = wf[W_RMAX, r] * wf[W_RMAX, r] > tol and wi[W_SEARCHED, r] != wi[W_PASS, r] - 1
