@@ -1083,9 +1083,10 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
 
     Every residual comes with its Jacobian, so where ``_be_newton`` assembles the Jacobian again
     at the iterate a line search accepted, the trial's serves (the same bits): it is counted in
-    ``out[O_NJAC]`` as ``_be_newton`` counts it, and not computed. The lanes at a Newton step
-    factor and solve at once (:func:`factor`, :func:`solve`); a lane whose factors would
-    exchange rows takes ``band_factor``'s own step (:func:`_newton_step`). Once no robot is left
+    ``out[O_NJAC]`` as ``_be_newton`` counts it, and not computed. Each round also factors and
+    solves every lane's system at once (:func:`factor`, :func:`solve`), before the lanes go on,
+    so a lane that takes a Newton step at its residual takes it in the same visit; a lane whose
+    factors would exchange rows takes ``band_factor``'s own step (:func:`_newton_step`). Once no robot is left
     to take and at most :data:`SCALAR_TAIL` lanes are busy, their jobs end one by one in scalar
     code (:func:`_finish_alone`), where a round would cost the whole block. Bit for bit, but for
     the sign and payload of a NaN, which in vector code depend on the order in which an
@@ -1101,35 +1102,27 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
         wi[W_ROBOT, r] = -1
         taken = _next_job(s, uk, ul, robots, nsteps, status, taken, wi, r)
     while True:
-        # each lane goes on from its residual (the first time, starts its job); then, if any is
-        # at a Newton step, those lanes go on from band_factor and band_solve on -R, made at
-        # once. A lane whose job ends takes the next robot and starts its job in the same pass
-        solving = False
-        for solved in (False, True):
-            if solved:
-                if not solving:
+        # each lane goes on from its residual (the first time, starts its job). At a Newton step
+        # it takes the solution already made at that residual and goes on to its next residual.
+        # A lane whose job ends takes the next robot and starts its job in the same visit
+        for r in range(LANES):
+            i = wi[W_ROBOT, r]
+            if i < 0:
+                continue
+            si = layout.sim_views(s.f[i], s.ibuf[i])
+            while True:
+                awaits = _work(si, uk[i], ul[i], x, p, wi, wf, dt, r)
+                if awaits == _RESIDUAL:
                     break
-                factor(x.J, x.kept, n2)
-                for k in range(n2 * LANES):
-                    x.dv[k] = -x.R[k]
-                solve(x.J, x.dv, n2)
-            for r in range(LANES):
-                i = wi[W_ROBOT, r]
-                if i < 0 or (solved and wi[W_PHASE, r] != _SOLVE):
+                if awaits == _NEWTON_STEP:
+                    if not _newton_step(si, x, dt, r, False):
+                        wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
                     continue
+                taken = _next_job(s, uk, ul, robots, nsteps, status, taken, wi, r)
+                i = wi[W_ROBOT, r]
+                if i < 0:
+                    break
                 si = layout.sim_views(s.f[i], s.ibuf[i])
-                if solved and not _newton_step(si, x, dt, r, False):
-                    wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
-                while True:
-                    awaits = _work(si, uk[i], ul[i], x, p, wi, wf, dt, r)
-                    if awaits != _ENDED:
-                        break
-                    taken = _next_job(s, uk, ul, robots, nsteps, status, taken, wi, r)
-                    i = wi[W_ROBOT, r]
-                    if i < 0:
-                        break
-                    si = layout.sim_views(s.f[i], s.ibuf[i])
-                solving |= awaits == _NEWTON_STEP
         busy = 0
         for r in range(LANES):
             busy += wi[W_ROBOT, r] >= 0
@@ -1140,7 +1133,14 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
                 if wi[W_ROBOT, r] >= 0:
                     _finish_alone(s, uk, ul, robots, nsteps, status, x, p, wi, wf, dt, r)
             return
+        # every lane's residual, and the Newton step from it, whether or not the lane takes it:
+        # about 70 % of the lanes do at a residual, and a round with none at a Newton step was
+        # not seen (256 worms under random actions, 108 rounds a step, every one factored)
         ground_residual(x, p, dt, x.res)
+        factor(x.J, x.kept, n2)
+        for k in range(n2 * LANES):
+            x.dv[k] = -x.R[k]
+        solve(x.J, x.dv, n2)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
