@@ -1086,12 +1086,12 @@ def crawl(s, uk, ul, robots, nsteps, status, x, p, wi, wf):
     ``out[O_NJAC]`` as ``_be_newton`` counts it, and not computed. Each round also factors and
     solves every lane's system at once (:func:`factor`, :func:`solve`), before the lanes go on,
     so a lane that takes a Newton step at its residual takes it in the same visit; a lane whose
-    factors would exchange rows takes ``band_factor``'s own step (:func:`_newton_step`). Once no robot is left
-    to take and at most :data:`SCALAR_TAIL` lanes are busy, their jobs end one by one in scalar
-    code (:func:`_finish_alone`), where a round would cost the whole block. Bit for bit, but for
-    the sign and payload of a NaN, which in vector code depend on the order in which an
-    instruction takes its operands: a robot whose state is not finite fails as alone, its
-    diagnostics NaN as alone.
+    factors would exchange rows takes ``band_factor``'s own step (:func:`_newton_step`). Once
+    no robot is left to take and at most :data:`SCALAR_TAIL` lanes are busy, their jobs end one
+    by one in scalar code (:func:`_finish_alone`), where a round would cost the whole block. Bit
+    for bit, but for the sign and payload of a NaN, which in vector code depend on the order in
+    which an instruction takes its operands: a robot whose state is not finite fails as alone,
+    its diagnostics NaN as alone.
     """
     robots, nsteps, status, wi, wf = layout.borrowed((robots, nsteps, status, wi, wf))
     first = robots[0]
