@@ -14,7 +14,8 @@ loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/
   entry (row, col) at ``(row * BAND + col) * LANES + r``), strides that are compile-time
   constants, so that LLVM can tell the stores of one lane's straight-line code apart;
 - a lane loop runs ``LANES`` = 16 iterations, the least that LLVM's loop vectorizer takes on
-  (on AVX-512 two registers of eight doubles);
+  (four registers of four doubles: LLVM's tuning for Intel's cores prefers 256-bit vectors even
+  with AVX-512; two of eight with ``SOFT_SNAKE_GYM_VECTOR_BITS=512``, ``vector_width``);
 - a loop that does the same to every element of its arrays runs over the flat index, not over
   elements and lanes: LLVM unrolls a lane loop with a small body whole before its loop
   vectorizer runs, and the unrolled code stays scalar (numba runs no SLP vectorizer), where a

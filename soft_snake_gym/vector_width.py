@@ -1,0 +1,56 @@
+"""``SOFT_SNAKE_GYM_VECTOR_BITS=512``: numba's LLVM asked for 512-bit vectors, before anything compiles.
+
+LLVM tunes for Intel's cores with AVX-512 as if they preferred 256-bit vectors, so the batched
+kernels' lane loops (``physics.lanes``: sixteen robots an instruction) run four doubles an
+instruction where the registers hold eight. With ``-prefer-256-bit`` added to the host's
+features they run eight. Measured on an Intel Xeon with AVX-512 (docs/performance.md, "512-bit
+vectors"): the compiled call of 256 eels 1.06× faster on one thread and 1.07× on two, of 256
+worms 1.03× and 1.02×, but the single envs' step 0.93× and 0.92×. So it is a choice, not the
+default: for batched training on such a CPU. The numbers are the same, bit for bit: the kernels
+are compiled without reassociation, so a wider vector does more of the same operations at once.
+
+numba takes its CPU's features from ``NUMBA_CPU_FEATURES`` (``numba.config.CPU_FEATURES``) when it
+makes its first function, so :func:`apply_vector_bits` runs once, at the package's import, before
+any of the package's functions is made: with the variable at 512 it sets ``NUMBA_CPU_FEATURES``
+for the whole process and its children, for any numba code (numba caches such code apart from
+code for the default features). It changes nothing where the user has set ``NUMBA_CPU_FEATURES``
+or ``NUMBA_CPU_NAME``, on a CPU without AVX-512, or where numba made a function before the
+package's import.
+"""
+
+from __future__ import annotations
+
+import os
+
+from llvmlite import binding
+from numba.core import config
+
+__all__ = ["VECTOR_BITS", "apply_vector_bits"]
+
+VECTOR_BITS = "SOFT_SNAKE_GYM_VECTOR_BITS"
+"""The environment variable: 256 (the default, LLVM's choice) or 512."""
+
+
+def apply_vector_bits() -> bool:
+    """Set ``NUMBA_CPU_FEATURES`` to the host's features and ``-prefer-256-bit`` if ``VECTOR_BITS`` asks for 512.
+
+    Returns:
+        True if it set the variable.
+
+    Raises:
+        ValueError: the variable is neither 256 nor 512.
+    """
+    env = os.environ
+    bits = env.get(VECTOR_BITS) or "256"
+    if bits not in ("256", "512"):
+        raise ValueError(
+            f"{VECTOR_BITS} = {bits!r}: use 256 (the default) or 512 (batched training with AVX-512)"
+        )
+    if bits == "256" or "NUMBA_CPU_FEATURES" in env or "NUMBA_CPU_NAME" in env:
+        return False
+    features = binding.get_host_cpu_features()
+    if not features.get("avx512f", False):
+        return False
+    env["NUMBA_CPU_FEATURES"] = features.flatten() + ",-prefer-256-bit"
+    config.reload_config()  # numba read its variables at its import
+    return True
