@@ -5,7 +5,7 @@ kernels' lane loops (``physics.lanes``: sixteen robots an instruction) run four 
 instruction where the registers hold eight. With ``-prefer-256-bit`` added to the host's
 features they run eight. Measured on an Intel Xeon with AVX-512 (docs/performance.md, "512-bit
 vectors"): the compiled call of 256 eels 1.06× faster on one thread and 1.07× on two, of 256
-worms 1.03× and 1.02×, but the single envs' step 0.93× and 0.92×. So it is a choice, not the
+worms 1.03× and 1.02×, but the single envs' step 0.94× and 0.92×. So it is a choice, not the
 default: for batched training on such a CPU. The numbers are the same, bit for bit: the kernels
 are compiled without reassociation, so a wider vector does more of the same operations at once.
 
