@@ -5,9 +5,10 @@ kernels' lane loops (``physics.lanes``: sixteen robots an instruction) run four 
 instruction where the registers hold eight. With ``-prefer-256-bit`` added to the host's
 features they run eight. Measured on an Intel Xeon with AVX-512 (docs/performance.md, "512-bit
 vectors"): the compiled call of 256 eels 1.06× faster on one thread and 1.07× on two, of 256
-worms 1.03× and 1.02×, but the single envs' step 0.94× and 0.92×. So it is a choice, not the
-default: for batched training on such a CPU. The numbers are the same, bit for bit: the kernels
-are compiled without reassociation, so a wider vector does more of the same operations at once.
+worms 1.03× and 1.02×, but the single envs' step 0.94× and 0.92×, and PPO's rollout on 8
+batched eels 0.99×. So it is a choice, not the default: for large batches on such a CPU. The
+numbers are the same, bit for bit: the kernels are compiled without reassociation, so a wider
+vector does more of the same operations at once.
 
 numba takes its CPU's features from ``NUMBA_CPU_FEATURES`` (``numba.config.CPU_FEATURES``) when it
 makes its first function, so :func:`apply_vector_bits` runs once, at the package's import, before
@@ -32,7 +33,7 @@ VECTOR_BITS = "SOFT_SNAKE_GYM_VECTOR_BITS"
 
 
 def apply_vector_bits() -> bool:
-    """Set ``NUMBA_CPU_FEATURES`` to the host's features and ``-prefer-256-bit`` if ``VECTOR_BITS`` asks for 512.
+    """Set ``NUMBA_CPU_FEATURES`` to the host's features and ``-prefer-256-bit`` if ``VECTOR_BITS`` is 512.
 
     Returns:
         True if it set the variable.
@@ -44,7 +45,7 @@ def apply_vector_bits() -> bool:
     bits = env.get(VECTOR_BITS) or "256"
     if bits not in ("256", "512"):
         raise ValueError(
-            f"{VECTOR_BITS} = {bits!r}: use 256 (the default) or 512 (batched training with AVX-512)"
+            f"{VECTOR_BITS} = {bits!r}: use 256 (the default) or 512 (large batches with AVX-512)"
         )
     if bits == "256" or "NUMBA_CPU_FEATURES" in env or "NUMBA_CPU_NAME" in env:
         return False

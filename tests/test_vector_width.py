@@ -21,7 +21,7 @@ print(os.environ.get("NUMBA_CPU_FEATURES", "unset"))
 
 
 def _import(**env: str) -> subprocess.CompletedProcess:
-    """Import the package in a new interpreter with ``env`` over this one's, NUMBA_CPU_* and the variable unset."""
+    """Import the package in a new interpreter, NUMBA_CPU_* and the variable unset, ``env`` added."""
     base = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_CPU_", "SOFT_SNAKE_GYM_VECTOR"))}
     return subprocess.run(
         [sys.executable, "-c", PROBE], env=base | env, capture_output=True, text=True, timeout=120
