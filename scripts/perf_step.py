@@ -12,15 +12,26 @@ names, the interpreter's and the libraries' under their own.
 
     python scripts/perf_step.py SoftWorm-v0
     python scripts/perf_step.py SoftEel-v0 --robots 256 --threads 2 --seconds 10
+    python scripts/perf_step.py SoftEel-v0 --robots 256 --mix soft_snake_gym.physics.lanes.residual
 
-Needs ``perf`` (Debian: ``apt install linux-perf``) and ``kernel.perf_event_paranoid`` at most 2.
+``--mix`` also reads the named function's machine code out of the process while it runs,
+disassembles it with ``objdump`` and sorts its samples by the instruction at each sample's
+address: what kind of work (vector multiplies, adds, divisions, loads and stores, scalar
+arithmetic, integer and control) and how wide (512-, 256- or 128-bit registers). A timer's
+sample stops the core at the oldest instruction not yet done, so the time shows where the core
+waits: on a load whose data has not come, on an operation whose operands are not ready.
+
+Needs ``perf`` (Debian: ``apt install linux-perf``) and ``kernel.perf_event_paranoid`` at most 2;
+``--mix`` needs ``objdump`` (binutils).
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -79,12 +90,104 @@ def numba_symbols() -> dict[int, str]:
     return names
 
 
-def write_perf_map(names: dict[int, str], path: str) -> None:
-    """``perf``'s map of code made at run time: ``start size name`` a line, each up to the next start."""
+def code_ranges(names: dict[int, str]) -> list[tuple[int, int, str]]:
+    """``(start, size, name)`` of every function in ``names``: each runs up to the next one's start."""
     starts = sorted(names)
+    ends = [*starts[1:], starts[-1] + 0x10000]
+    return [
+        (start, min(end - start, 0x100000), names[start]) for start, end in zip(starts, ends, strict=True)
+    ]
+
+
+def write_perf_map(names: dict[int, str], path: str) -> None:
+    """``perf``'s map of code made at run time: ``start size name`` a line (:func:`code_ranges`)."""
     with open(path, "w") as f:
-        for start, end in zip(starts, [*starts[1:], starts[-1] + 0x10000], strict=True):
-            f.write(f"{start:x} {min(end - start, 0x100000):x} {names[start]}\n")
+        for start, size, name in code_ranges(names):
+            f.write(f"{start:x} {size:x} {name}\n")
+
+
+_INSTRUCTION = re.compile(r"\s*([0-9a-f]+):\t(?:[0-9a-f]{2} )+\s*\t(\S+)\s*(.*)")
+_VECTOR_KINDS = (("vmul", "multiply"), ("vadd", "add, subtract"), ("vsub", "add, subtract"),
+                 ("vfm", "fused multiply-add"), ("vfnm", "fused multiply-add"), ("vdiv", "divide"),
+                 ("vsqrt", "square root"))  # fmt: skip
+
+
+def instruction_kind(mnemonic: str, operands: str) -> tuple[str, str]:
+    """What an instruction (objdump's AT&T syntax) does and how wide: ``("vector multiply", "256-bit")``.
+
+    The kinds: vector arithmetic by operation, vector loads and stores (moves with a memory
+    operand, a store where it is the destination, the last operand), the other vector
+    instructions (moves between registers, masks, compares, shuffles), scalar floating point
+    (``sd``/``ss``) and the rest, integer and control.
+    """
+    width = "512-bit" if "%zmm" in operands else "256-bit" if "%ymm" in operands else "128-bit or none"
+    if mnemonic.startswith("v") and mnemonic.endswith(("sd", "ss")) and width == "128-bit or none":
+        return "scalar floating point", width
+    if not mnemonic.startswith("v"):
+        return "integer and control", width
+    if mnemonic.startswith("vmov"):
+        if "(" not in operands:
+            return "vector other", width
+        return ("vector store" if operands.endswith(")") else "vector load"), width  # AT&T: destination last
+    for prefix, kind in _VECTOR_KINDS:
+        if mnemonic.startswith(prefix):
+            return f"vector {kind}", width
+    return "vector other", width
+
+
+def instruction_mix(data: str, ranges: list[tuple[int, int, str]], function: str) -> list[str]:
+    """A report, line by line, of the samples in ``data`` on ``function``'s code, by instruction kind and width.
+
+    ``ranges`` are this process's :func:`code_ranges`: every compiled copy of the function (one
+    per specialization and library) is read out of memory, up to the next function or the end of
+    its mapping, and disassembled (what follows its last instruction decodes as junk, where no
+    sample falls).
+    """
+    mapped = []  # this process's mappings: a copy is read no further than the end of its own
+    with open("/proc/self/maps") as f:
+        for line in f:
+            low, high = line.split()[0].split("-")
+            mapped.append((int(low, 16), int(high, 16)))
+    copies = [
+        (start, min(size, *(high - start for low, high in mapped if low <= start < high)))
+        for start, size, name in ranges
+        if name == function
+    ]
+    ips = subprocess.run(
+        ["perf", "script", "-i", data, "-F", "ip"], capture_output=True, text=True, check=True
+    ).stdout.split()
+    counts: dict[int, int] = {}
+    for ip in ips:
+        counts[int(ip, 16)] = counts.get(int(ip, 16), 0) + 1
+    by_kind: dict[str, int] = {}
+    by_width: dict[str, int] = {}
+    total = 0
+    with tempfile.TemporaryDirectory() as tmp:
+        for start, size in copies:
+            path = os.path.join(tmp, f"{start:x}.bin")
+            with open(path, "wb") as f:
+                f.write(ctypes.string_at(start, size))
+            listing = subprocess.run(
+                ["objdump", "-D", "-b", "binary", "-m", "i386:x86-64", f"--adjust-vma={start:#x}", path],
+                capture_output=True,
+                text=True,
+                check=True,
+            ).stdout
+            for line in listing.splitlines():
+                match = _INSTRUCTION.match(line)
+                if not match:
+                    continue
+                hits = counts.get(int(match.group(1), 16), 0)
+                kind, width = instruction_kind(match.group(2), match.group(3))
+                by_kind[kind] = by_kind.get(kind, 0) + hits
+                by_width[width] = by_width.get(width, 0) + hits
+                total += hits
+    lines = [f"{function}: {total} samples in its {len(copies)} compiled copies"]
+    for title, shares in (("by kind", by_kind), ("by register width", by_width)):
+        lines.append(f"  {title}:")
+        for key, hits in sorted(shares.items(), key=lambda kv: -kv[1]):
+            lines.append(f"    {100 * hits / max(total, 1):6.2f} %  {key}")
+    return lines
 
 
 def stepper(env_id: str, robots: int, threads: int):
@@ -119,15 +222,28 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1, help="the batched env's numba threads")
     parser.add_argument("--seconds", type=float, default=8.0, help="how long perf records")
     parser.add_argument("--top", type=int, default=30, help="functions to print")
+    parser.add_argument(
+        "--mix",
+        metavar="FUNCTION",
+        help="a compiled function's samples by instruction kind (its Python name)",
+    )
     args = parser.parse_args()
     if args.robots < 0 or args.threads < 1 or args.seconds <= 0 or args.top < 1:
         parser.error("--robots must be >= 0, --threads and --top >= 1, --seconds > 0")
+    if args.mix and shutil.which("objdump") is None:
+        parser.error("--mix needs objdump: apt install binutils (Debian), then run this again")
 
     env, step = stepper(args.env_id, args.robots, args.threads)
     for _ in range(300):  # every kernel the loop calls is loaded before the map is written
         step()
+    names = numba_symbols()
+    if args.mix and args.mix not in names.values():
+        sys.exit(
+            f"--mix {args.mix}: no function of that name is compiled for this loop; give one that the "
+            "report lists, as soft_snake_gym.physics.lanes.residual"
+        )
     map_path = f"/tmp/perf-{os.getpid()}.map"
-    write_perf_map(numba_symbols(), map_path)
+    write_perf_map(names, map_path)
     with tempfile.TemporaryDirectory() as tmp:
         data = os.path.join(tmp, "perf.data")
         try:
@@ -169,6 +285,7 @@ def main() -> None:
             text=True,
             check=True,
         ).stdout
+        mix = instruction_mix(data, code_ranges(names), args.mix) if args.mix else []
     os.remove(map_path)
     env.close()
     shares: dict[str, float] = {}
@@ -198,6 +315,8 @@ def main() -> None:
     print(f"the top {args.top} functions:")
     for name, share in sorted(shares.items(), key=lambda kv: -kv[1])[: args.top]:
         print(f"  {share:6.2f} %  {name[:110]}")
+    for line in mix:
+        print(line)
 
 
 if __name__ == "__main__":
