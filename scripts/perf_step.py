@@ -19,7 +19,8 @@ disassembles it with ``objdump`` and sorts its samples by the instruction at eac
 address: what kind of work (vector multiplies, adds, divisions, loads and stores, scalar
 arithmetic, integer and control) and how wide (512-, 256- or 128-bit registers). A timer's
 sample stops the core at the oldest instruction not yet done, so the time shows where the core
-waits: on a load whose data has not come, on an operation whose operands are not ready.
+waits: on a load whose data has not come, on an operation whose operands are not ready, on a
+store whose data a slow instruction before it (a square root, a division) is still making.
 
 Needs ``perf`` (Debian: ``apt install linux-perf``) and ``kernel.perf_event_paranoid`` at most 2;
 ``--mix`` needs ``objdump`` (binutils).
