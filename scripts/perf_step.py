@@ -13,6 +13,7 @@ names, the interpreter's and the libraries' under their own.
     python scripts/perf_step.py SoftWorm-v0
     python scripts/perf_step.py SoftEel-v0 --robots 256 --threads 2 --seconds 10
     python scripts/perf_step.py SoftEel-v0 --robots 256 --mix soft_snake_gym.physics.lanes.residual
+    python scripts/perf_step.py SoftWorm-v0 --robots 256 --mix soft_snake_gym.physics.lanes.crawl --windows 5
 
 ``--mix`` also reads the named function's machine code out of the process while it runs,
 disassembles it with ``objdump`` and sorts its samples by the instruction at each sample's
@@ -107,6 +108,8 @@ def write_perf_map(names: dict[int, str], path: str) -> None:
             f.write(f"{start:x} {size:x} {name}\n")
 
 
+WINDOW = 16
+"""Instructions in each of ``--windows``' runs."""
 _INSTRUCTION = re.compile(r"\s*([0-9a-f]+):\t(?:[0-9a-f]{2} )+\s*\t(\S+)\s*(.*)")
 _VECTOR_KINDS = (("vmul", "multiply"), ("vadd", "add, subtract"), ("vsub", "add, subtract"),
                  ("vfm", "fused multiply-add"), ("vfnm", "fused multiply-add"), ("vdiv", "divide"),
@@ -136,13 +139,16 @@ def instruction_kind(mnemonic: str, operands: str) -> tuple[str, str]:
     return "vector other", width
 
 
-def instruction_mix(data: str, ranges: list[tuple[int, int, str]], function: str) -> list[str]:
-    """A report, line by line, of the samples in ``data`` on ``function``'s code, by instruction kind and width.
+def instruction_mix(
+    data: str, ranges: list[tuple[int, int, str]], function: str, windows: int = 0
+) -> list[str]:
+    """The lines of a report of ``data``'s samples on ``function``'s code, by instruction kind and width.
 
     ``ranges`` are this process's :func:`code_ranges`: every compiled copy of the function (one
     per specialization and library) is read out of memory, up to the next function or the end of
     its mapping, and disassembled (what follows its last instruction decodes as junk, where no
-    sample falls).
+    sample falls). With ``windows``, also the hottest runs of :data:`WINDOW` instructions, each
+    instruction with its samples: where a wait shows (a store after a square root) and on what.
     """
     mapped = []  # this process's mappings: a copy is read no further than the end of its own
     with open("/proc/self/maps") as f:
@@ -162,6 +168,7 @@ def instruction_mix(data: str, ranges: list[tuple[int, int, str]], function: str
         counts[int(ip, 16)] = counts.get(int(ip, 16), 0) + 1
     by_kind: dict[str, int] = {}
     by_width: dict[str, int] = {}
+    code: list[list[tuple[int, int, str]]] = []  # each copy's (offset, samples, instruction)
     total = 0
     with tempfile.TemporaryDirectory() as tmp:
         for start, size in copies:
@@ -174,12 +181,14 @@ def instruction_mix(data: str, ranges: list[tuple[int, int, str]], function: str
                 text=True,
                 check=True,
             ).stdout
+            code.append([])
             for line in listing.splitlines():
                 match = _INSTRUCTION.match(line)
                 if not match:
                     continue
                 hits = counts.get(int(match.group(1), 16), 0)
                 kind, width = instruction_kind(match.group(2), match.group(3))
+                code[-1].append((int(match.group(1), 16) - start, hits, f"{match.group(2)} {match.group(3)}"))
                 by_kind[kind] = by_kind.get(kind, 0) + hits
                 by_width[width] = by_width.get(width, 0) + hits
                 total += hits
@@ -188,6 +197,12 @@ def instruction_mix(data: str, ranges: list[tuple[int, int, str]], function: str
         lines.append(f"  {title}:")
         for key, hits in sorted(shares.items(), key=lambda kv: -kv[1]):
             lines.append(f"    {100 * hits / max(total, 1):6.2f} %  {key}")
+    runs = [(k, copy[i : i + WINDOW]) for k, copy in enumerate(code) for i in range(0, len(copy), WINDOW)]
+    runs.sort(key=lambda kr: -sum(hits for _, hits, _ in kr[1]))
+    for k, run in runs[:windows]:
+        share = 100 * sum(hits for _, hits, _ in run) / max(total, 1)
+        lines.append(f"  {share:5.1f} % at {run[0][0]:#x}-{run[-1][0]:#x} of copy {k + 1}:")
+        lines.extend(f"    {offset:#7x} {hits:6d}  {text}" for offset, hits, text in run)
     return lines
 
 
@@ -228,9 +243,14 @@ def main() -> None:
         metavar="FUNCTION",
         help="a compiled function's samples by instruction kind (its Python name)",
     )
+    parser.add_argument(
+        "--windows", type=int, default=0, help="with --mix: its hottest runs of 16 instructions, listed"
+    )
     args = parser.parse_args()
-    if args.robots < 0 or args.threads < 1 or args.seconds <= 0 or args.top < 1:
-        parser.error("--robots must be >= 0, --threads and --top >= 1, --seconds > 0")
+    if args.robots < 0 or args.threads < 1 or args.seconds <= 0 or args.top < 1 or args.windows < 0:
+        parser.error("--robots and --windows must be >= 0, --threads and --top >= 1, --seconds > 0")
+    if args.windows and not args.mix:
+        parser.error("--windows lists a function's code: give the function with --mix")
     if args.mix and shutil.which("objdump") is None:
         parser.error("--mix needs objdump: apt install binutils (Debian), then run this again")
 
@@ -286,7 +306,7 @@ def main() -> None:
             text=True,
             check=True,
         ).stdout
-        mix = instruction_mix(data, code_ranges(names), args.mix) if args.mix else []
+        mix = instruction_mix(data, code_ranges(names), args.mix, args.windows) if args.mix else []
     os.remove(map_path)
     env.close()
     shares: dict[str, float] = {}
