@@ -54,7 +54,7 @@ import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.envs.registration import importable_id
 from soft_snake_gym.envs.vector import ROBOTS_PER_THREAD
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-from soft_snake_gym.training import load_train_config, policy_kwargs, torch_for_learning
+from soft_snake_gym.training import Terminated, load_train_config, policy_kwargs, torch_for_learning
 
 __all__ = ["run_benchmark", "format_report", "DEFAULT_ROBOTS", "DEFAULT_NODES", "ENVPOOL_ROBOTS"]
 
@@ -391,6 +391,10 @@ def run_benchmark(
     """Run every case; returns the results (see :func:`format_report`).
 
     The batched worms run at 256 robots (or, if 256 is not among ``robots``, at the largest count).
+    A ``KeyboardInterrupt`` (Ctrl-C; SIGTERM under ``training.sigterm_as_interrupt``) ends the run
+    early and keeps what it measured: in the rounds, the complete ones (every case in the same
+    rounds, as the ratios need them), and after them, each row made before it; the results then
+    say where in ``interrupted``. One in the first round, with no round complete, propagates.
     """
     say = progress or (lambda msg: None)
     all_threads = numba.config.NUMBA_NUM_THREADS
@@ -432,13 +436,26 @@ def run_benchmark(
             cases[f"EnvPool Swimmer-v4 n={n} threads={threads}"] = _EnvPoolCase(n, threads)
     rates: dict[str, list[float]] = {name: [] for name in cases}
     peaks: dict[int, list[float]] = {threads: [] for threads in sorted({1, all_threads})}
-    for r in range(repeats):
-        for name, case in cases.items():
-            say(f"round {r + 1}/{repeats}: {name}")
-            rates[name].append(case.run(seconds))
-        for threads, rounds in peaks.items():
-            say(f"round {r + 1}/{repeats}: matmul peak, {threads} thread(s)")
-            rounds.append(matmul_rate(threads, min(seconds, 1.0)))
+    interrupted = None  # where Ctrl-C or SIGTERM stopped the run: what was measured is kept
+    complete = 0
+    try:
+        for r in range(repeats):
+            for name, case in cases.items():
+                say(f"round {r + 1}/{repeats}: {name}")
+                rates[name].append(case.run(seconds))
+            for threads, rounds in peaks.items():
+                say(f"round {r + 1}/{repeats}: matmul peak, {threads} thread(s)")
+                rounds.append(matmul_rate(threads, min(seconds, 1.0)))
+            complete = r + 1
+    except KeyboardInterrupt as err:
+        if complete == 0:  # no round has every case: nothing to compare
+            _close(cases)
+            raise
+        interrupted = _stop(
+            err, f"in round {complete + 1} of {repeats}; its {complete} complete rounds are kept"
+        )
+        for kept in (*rates.values(), *peaks.values()):
+            del kept[complete:]  # the interrupted round's cases were not all measured
     rows = []
     for name, case in cases.items():
         rows.append(
@@ -451,22 +468,28 @@ def run_benchmark(
                 "rounds": rates[name],
             }
         )
-    shares = {}
-    for n in robots:
-        name = f"SoftEel-v0 batched n={n} threads=1"
-        say(f"kernel share: {name}")
-        shares[name] = _kernel_share(cases[name], seconds)
-    for case in cases.values():
-        case.env.close()
-
-    ppo_rows = []
-    if ppo:
-        say(f"PPO with the batched env and with SubprocVecEnv, {repeats} interleaved rounds")
-        ppo_rows = time_ppo("SoftEel-v0", ppo_n_envs, ppo_timesteps, repeats)
-    node_rows = []
-    for N in nodes:
-        say(f"cost per step at N = {N}")
-        node_rows.append(time_nodes(N, node_robots, seconds))
+    shares: dict[str, float] = {}
+    ppo_rows: list[dict[str, Any]] = []
+    node_rows: list[dict[str, Any]] = []
+    phase = "the kernel shares"
+    try:
+        if interrupted is None:
+            for n in robots:
+                name = f"SoftEel-v0 batched n={n} threads=1"
+                say(f"kernel share: {name}")
+                shares[name] = _kernel_share(cases[name], seconds)
+        _close(cases)
+        if ppo and interrupted is None:
+            phase = "the PPO rounds"
+            say(f"PPO with the batched env and with SubprocVecEnv, {repeats} interleaved rounds")
+            ppo_rows = time_ppo("SoftEel-v0", ppo_n_envs, ppo_timesteps, repeats)
+        for N in nodes if interrupted is None else ():
+            phase = f"the cost per step at N = {N}"
+            say(phase)
+            node_rows.append(time_nodes(N, node_robots, seconds))
+    except KeyboardInterrupt as err:
+        _close(cases)
+        interrupted = _stop(err, f"in {phase}; every measurement before it is kept")
 
     res: dict[str, Any] = {
         "machine": {
@@ -496,9 +519,25 @@ def run_benchmark(
         "mujoco": mujoco_missing or "installed",
         "envpool": envpool_missing or "installed",
     }
+    if interrupted:
+        res["interrupted"] = interrupted
     res["ratios"] = _ratios(res)
     res["compute"] = _compute(res)
     return res
+
+
+def _stop(err: KeyboardInterrupt, where: str) -> dict[str, str]:
+    """The results' ``interrupted``: the signal and ``where``.
+
+    SIGTERM if ``err`` is a ``training.Terminated``, else SIGINT (Ctrl-C).
+    """
+    return {"signal": "SIGTERM" if isinstance(err, Terminated) else "SIGINT", "where": where}
+
+
+def _close(cases: dict[str, Any]) -> None:
+    """Close every case's env and take the case out of ``cases``, so that a second call closes nothing."""
+    while cases:
+        cases.popitem()[1].env.close()
 
 
 def _compute(res: dict[str, Any]) -> list[dict[str, Any]]:
@@ -650,6 +689,9 @@ def format_report(res: dict[str, Any]) -> str:
         f"{res['machine']['cpus']} CPUs, numba threads "
         f"{res['machine']['numba_threads']} ({res['machine']['threading_layer']})"
     ]
+    if "interrupted" in res:
+        stop = res["interrupted"]
+        lines.append(f"stopped early by {stop['signal']} {stop['where']}")
     for lib, rows in (("mujoco", "Swimmer-v5"), ("envpool", "EnvPool Swimmer-v4")):
         if res.get(lib, "installed") != "installed":
             lines.append(f"{rows} rows skipped: {res[lib]}")

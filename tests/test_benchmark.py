@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import json
+import signal
 import statistics
 import sys
 from pathlib import Path
 
 import pytest
-from support import cli
+from support import cli, cli_in_background
 
 from soft_snake_gym import benchmark
 from soft_snake_gym.benchmark import format_report, run_benchmark
@@ -88,6 +89,50 @@ def test_benchmark_cli_writes_json_and_png(tmp_path, capsys):
         assert all(abs(r["dt"] - 0.04) < 1e-12 for r in pool)  # frame_skip 4 x timestep 0.01
     else:
         assert "EnvPool Swimmer-v4 rows skipped" in text
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupted_benchmark_writes_its_complete_rounds_and_exits_with_the_signal(tmp_path, sig):
+    out = tmp_path / "bench.json"
+    run = cli_in_background(
+        *["benchmark", "--seconds", "0.02", "--repeats", "1000", "--robots", "2", "--no-ppo"],
+        *["--nodes", "10", "--node-robots", "2", "--envpool-robots", "2", "--json", str(out)],
+    )
+    for line in run.stderr:  # the third round begins: two are complete
+        if "round 3/1000" in line:
+            break
+    run.send_signal(sig)
+    stdout, stderr = run.communicate(timeout=300)
+    assert run.returncode == 128 + sig, stderr
+    res = json.loads(out.read_text())
+    stop = res["interrupted"]
+    assert stop["signal"] == signal.Signals(sig).name
+    rounds = {len(r["rounds"]) for r in res["throughput"]} | {len(v) for v in res["peak"]["rounds"].values()}
+    assert len(rounds) == 1  # every case keeps the same rounds, the complete ones
+    (complete,) = rounds
+    assert 2 <= complete < 1000
+    assert stop["where"] == f"in round {complete + 1} of 1000; its {complete} complete rounds are kept"
+    for r in res["throughput"]:  # each figure is the median of the rounds kept
+        assert r["steps_per_s"] == statistics.median(r["rounds"]) > 0
+    assert res["nodes"] == [] and res["kernel_share"] == {}  # the phases after the rounds did not run
+    assert f"stopped early by {stop['signal']} {stop['where']}" in stdout
+    assert (tmp_path / "bench.png").stat().st_size > 10_000
+
+
+def test_a_benchmark_stopped_in_its_first_round_writes_nothing_and_says_why(tmp_path):
+    out = tmp_path / "bench.json"
+    run = cli_in_background(
+        *["benchmark", "--seconds", "5", "--repeats", "2", "--robots", "2", "--no-ppo", "--nodes"],
+        *["--json", str(out)],
+    )
+    for line in run.stderr:
+        if "round 1/2" in line:
+            break
+    run.send_signal(signal.SIGTERM)
+    _, stderr = run.communicate(timeout=300)
+    assert run.returncode == 143, stderr
+    assert "stopped by SIGTERM before every case had run once; nothing written" in stderr
+    assert not out.exists()
 
 
 def test_benchmark_without_envpool_says_so_and_skips_its_rows(monkeypatch):

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from soft_snake_gym.benchmark import (
     run_benchmark,
 )
 from soft_snake_gym.cli.common import CLIError
+from soft_snake_gym.training import Terminated, sigterm_as_interrupt
 
 NAME = "benchmark"
 HELP = "steps per second of the envs, batched env, PPO, against MuJoCo's Swimmer-v5 and EnvPool's Swimmer-v4"
@@ -82,19 +84,28 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"[benchmark] {msg}", file=sys.stderr, flush=True)
 
-    res = run_benchmark(
-        seconds=args.seconds,
-        repeats=args.repeats,
-        robots=tuple(args.robots),
-        sync_robots=args.sync_robots,
-        ppo=not args.no_ppo,
-        ppo_timesteps=args.ppo_timesteps,
-        ppo_n_envs=args.ppo_n_envs,
-        nodes=tuple(args.nodes),
-        node_robots=args.node_robots,
-        envpool_robots=args.envpool_robots,
-        progress=progress,
-    )
+    try:
+        with sigterm_as_interrupt():  # SIGTERM stops the run as Ctrl-C does: what it measured is written
+            res = run_benchmark(
+                seconds=args.seconds,
+                repeats=args.repeats,
+                robots=tuple(args.robots),
+                sync_robots=args.sync_robots,
+                ppo=not args.no_ppo,
+                ppo_timesteps=args.ppo_timesteps,
+                ppo_n_envs=args.ppo_n_envs,
+                nodes=tuple(args.nodes),
+                node_robots=args.node_robots,
+                envpool_robots=args.envpool_robots,
+                progress=progress,
+            )
+    except KeyboardInterrupt as err:  # before the first round was complete
+        name = "SIGTERM" if isinstance(err, Terminated) else "SIGINT"
+        print(
+            f"soft-snake benchmark: stopped by {name} before every case had run once; nothing written",
+            file=sys.stderr,
+        )
+        return _exit_code(name)
     report = format_report(res)
     res["report"] = report
     json_path = Path(args.json)
@@ -103,4 +114,10 @@ def run(args: argparse.Namespace) -> int:
     png = plots.benchmark_chart(res, args.png or json_path.with_suffix(".png"))
     print(report)
     print(f"\nwrote {json_path} and {png}")
-    return 0
+    stop = res.get("interrupted")
+    return 0 if stop is None else _exit_code(stop["signal"])
+
+
+def _exit_code(name: str) -> int:
+    """The exit code of a run stopped by signal ``name``, as a shell gives it: 130 (SIGINT), 143 (SIGTERM)."""
+    return 128 + int(getattr(signal, name))

@@ -23,6 +23,7 @@ from soft_snake_gym.training.run import (
     latest_checkpoint,
     plot_learning_curve,
     save_checkpoint,
+    sigterm_as_interrupt,
 )
 from soft_snake_gym.training.train import make_train_env, policy_kwargs, torch_for_learning, train
 
@@ -43,6 +44,7 @@ __all__ = [
     "plot_learning_curve",
     "policy_kwargs",
     "save_checkpoint",
+    "sigterm_as_interrupt",
     "steps_per_iteration",
     "torch_for_learning",
     "train",

@@ -51,6 +51,7 @@ __all__ = [
     "Terminated",
     "plot_learning_curve",
     "save_checkpoint",
+    "sigterm_as_interrupt",
 ]
 
 
@@ -126,11 +127,11 @@ class Terminated(KeyboardInterrupt):
 
 
 @contextlib.contextmanager
-def _sigterm_as_interrupt():
+def sigterm_as_interrupt():
     """Within the block, SIGTERM raises :class:`Terminated`.
 
-    Once; a repeat is ignored while the checkpoint is written. Outside the main thread, signals stay
-    as they are.
+    Once; a repeat is ignored while what was done is saved (a checkpoint, a benchmark's results).
+    Outside the main thread, signals stay as they are.
     """
     if threading.current_thread() is not threading.main_thread():
         yield

@@ -21,10 +21,10 @@ from soft_snake_gym.training.run import (
     _is_new_stage,
     _make_logger,
     _record_resume,
-    _sigterm_as_interrupt,
     _write_run_files,
     latest_checkpoint,
     save_checkpoint,
+    sigterm_as_interrupt,
 )
 
 __all__ = ["init_from", "make_train_env", "policy_kwargs", "torch_for_learning", "train"]
@@ -275,7 +275,7 @@ def _train(
             _write_run_files(cfg, run_dir, command)
         model.set_logger(_make_logger(run_dir))
         steps = planned_steps(cfg, model.num_timesteps) - model.num_timesteps
-        with _sigterm_as_interrupt():
+        with sigterm_as_interrupt():
             try:
                 if steps > 0:
                     model.learn(
