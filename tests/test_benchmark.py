@@ -143,9 +143,16 @@ def test_benchmark_without_envpool_says_so_and_skips_its_rows(monkeypatch):
     assert "EnvPool Swimmer-v4 rows skipped" in format_report(res)
 
 
-def test_benchmark_rejects_bad_options(capsys):
+def test_benchmark_rejects_bad_options(capsys, tmp_path):
     assert main(["benchmark", "--robots", "0", "--no-ppo"]) == 2
     assert "robot counts must be >= 1" in capsys.readouterr().err
+    # output paths that could not be written are refused before the run, not after it
+    assert main(["benchmark", "--json", str(tmp_path)]) == 2
+    assert "is a folder; give a file name" in capsys.readouterr().err
+    assert main(["benchmark", "--json", str(tmp_path / "b.json"), "--png", str(tmp_path / "b.xyz")]) == 2
+    err = capsys.readouterr().err
+    assert "--png: cannot draw a chart into" in err and ".png" in err
+    assert not list(tmp_path.iterdir())
 
 
 def test_stale_numba_cache_is_dropped_when_a_dependency_changes(tmp_path):

@@ -20,6 +20,7 @@ from soft_snake_gym.benchmark import (
     run_benchmark,
 )
 from soft_snake_gym.cli.common import CLIError
+from soft_snake_gym.studies.compare import check_figure_path
 from soft_snake_gym.training import Terminated, sigterm_as_interrupt
 
 NAME = "benchmark"
@@ -79,6 +80,14 @@ def run(args: argparse.Namespace) -> int:
         raise CLIError(f"robot counts must be >= 1 and node counts >= 3; got {bad}")
     if args.ppo_timesteps < 1:
         raise CLIError(f"--ppo-timesteps {args.ppo_timesteps}: need >= 1")
+    json_path = Path(args.json)
+    if json_path.is_dir():
+        raise CLIError(f"--json {args.json!r} is a folder; give a file name for the results")
+    png_path = Path(args.png) if args.png else json_path.with_suffix(".png")
+    try:  # checked before the run, which would otherwise end in the error with its results lost
+        check_figure_path(png_path)
+    except ValueError as err:
+        raise CLIError(f"--png: {err}") from None
 
     def progress(msg: str) -> None:
         if not args.quiet:
@@ -108,10 +117,9 @@ def run(args: argparse.Namespace) -> int:
         return _exit_code(name)
     report = format_report(res)
     res["report"] = report
-    json_path = Path(args.json)
     json_path.parent.mkdir(parents=True, exist_ok=True)
     json_path.write_text(json.dumps(res, indent=2))
-    png = plots.benchmark_chart(res, args.png or json_path.with_suffix(".png"))
+    png = plots.benchmark_chart(res, png_path)
     print(report)
     print(f"\nwrote {json_path} and {png}")
     stop = res.get("interrupted")
