@@ -498,6 +498,7 @@ def run_benchmark(
             "cpus": os.cpu_count(),
             "numba_threads": all_threads,
             "threading_layer": _threading_layer(),
+            **_code_target(),
         },
         "settings": {
             "seconds": seconds,
@@ -578,6 +579,19 @@ def _processor() -> str:
     except OSError:
         pass
     return platform.processor()
+
+
+def _code_target() -> dict[str, Any]:
+    """What numba compiles for: LLVM's name for the CPU, and whether 512-bit vectors were asked for.
+
+    ``llvm_cpu`` and ``vectors_512`` (``SOFT_SNAKE_GYM_VECTOR_BITS=512``, or any ``-prefer-256-bit``
+    in ``NUMBA_CPU_FEATURES``): the same code runs at different speeds for either, so a result
+    says which it measured.
+    """
+    from numba.core.registry import cpu_target
+
+    _, name, features = cpu_target.target_context.codegen().magic_tuple()
+    return {"llvm_cpu": name, "vectors_512": "-prefer-256-bit" in features.split(",")}
 
 
 def _threading_layer() -> str:
@@ -689,6 +703,9 @@ def format_report(res: dict[str, Any]) -> str:
         f"{res['machine']['cpus']} CPUs, numba threads "
         f"{res['machine']['numba_threads']} ({res['machine']['threading_layer']})"
     ]
+    if "llvm_cpu" in res["machine"]:  # results written before 2026-12-06 20:20 have no target
+        wide = ", 512-bit vectors asked for" if res["machine"]["vectors_512"] else ""
+        lines[0] += f", code for LLVM's {res['machine']['llvm_cpu']}{wide}"
     if "interrupted" in res:
         stop = res["interrupted"]
         lines.append(f"stopped early by {stop['signal']} {stop['where']}")

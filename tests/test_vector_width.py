@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -20,11 +21,19 @@ print(os.environ.get("NUMBA_CPU_FEATURES", "unset"))
 """
 
 
-def _import(**env: str) -> subprocess.CompletedProcess:
-    """Import the package in a new interpreter, NUMBA_CPU_* and the variable unset, ``env`` added."""
+# what a benchmark's results record of it
+BENCHMARK_PROBE = """
+import json
+from soft_snake_gym.benchmark import _code_target
+print(json.dumps(_code_target()))
+"""
+
+
+def _import(probe: str = PROBE, **env: str) -> subprocess.CompletedProcess:
+    """Run ``probe`` in a new interpreter, NUMBA_CPU_* and the variable unset, ``env`` added."""
     base = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_CPU_", "SOFT_SNAKE_GYM_VECTOR"))}
     return subprocess.run(
-        [sys.executable, "-c", PROBE], env=base | env, capture_output=True, text=True, timeout=120
+        [sys.executable, "-c", probe], env=base | env, capture_output=True, text=True, timeout=120
     )
 
 
@@ -55,3 +64,12 @@ def test_a_width_other_than_256_or_512_is_refused_at_import():
     run = _import(SOFT_SNAKE_GYM_VECTOR_BITS="1024")
     assert run.returncode != 0
     assert "SOFT_SNAKE_GYM_VECTOR_BITS = '1024': use 256 (the default) or 512" in run.stderr
+
+
+@pytest.mark.skipif(not AVX512, reason="the host has no AVX-512: the variable changes nothing")
+def test_a_benchmark_records_whether_it_measured_512_bit_vectors():
+    runs = [_import(BENCHMARK_PROBE), _import(BENCHMARK_PROBE, SOFT_SNAKE_GYM_VECTOR_BITS="512")]
+    assert all(run.returncode == 0 for run in runs), [run.stderr for run in runs]
+    default, wide = (json.loads(run.stdout) for run in runs)
+    assert default["vectors_512"] is False and wide["vectors_512"] is True
+    assert default["llvm_cpu"] == wide["llvm_cpu"] == binding.get_host_cpu_name()
