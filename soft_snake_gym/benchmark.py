@@ -54,7 +54,7 @@ import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.envs.registration import importable_id
 from soft_snake_gym.envs.vector import ROBOTS_PER_THREAD
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-from soft_snake_gym.training import Terminated, load_train_config, policy_kwargs, torch_for_learning
+from soft_snake_gym.training import load_train_config, policy_kwargs, stopped_by, torch_for_learning
 
 __all__ = ["run_benchmark", "format_report", "DEFAULT_ROBOTS", "DEFAULT_NODES", "ENVPOOL_ROBOTS"]
 
@@ -528,11 +528,8 @@ def run_benchmark(
 
 
 def _stop(err: KeyboardInterrupt, where: str) -> dict[str, str]:
-    """The results' ``interrupted``: the signal and ``where``.
-
-    SIGTERM if ``err`` is a ``training.Terminated``, else SIGINT (Ctrl-C).
-    """
-    return {"signal": "SIGTERM" if isinstance(err, Terminated) else "SIGINT", "where": where}
+    """The results' ``interrupted``: the signal's name (``training.stopped_by``) and ``where``."""
+    return {"signal": stopped_by(err).name, "where": where}
 
 
 def _close(cases: dict[str, Any]) -> None:

@@ -21,7 +21,7 @@ from soft_snake_gym.benchmark import (
 )
 from soft_snake_gym.cli.common import CLIError
 from soft_snake_gym.studies.compare import check_figure_path
-from soft_snake_gym.training import Terminated, sigterm_as_interrupt
+from soft_snake_gym.training import sigterm_as_interrupt, stopped_by
 
 NAME = "benchmark"
 HELP = "steps per second of the envs, batched env, PPO, against MuJoCo's Swimmer-v5 and EnvPool's Swimmer-v4"
@@ -109,12 +109,12 @@ def run(args: argparse.Namespace) -> int:
                 progress=progress,
             )
     except KeyboardInterrupt as err:  # before the first round was complete
-        name = "SIGTERM" if isinstance(err, Terminated) else "SIGINT"
+        sig = stopped_by(err)
         print(
-            f"soft-snake benchmark: stopped by {name} before every case had run once; nothing written",
+            f"soft-snake benchmark: stopped by {sig.name} before every case had run once; nothing written",
             file=sys.stderr,
         )
-        return _exit_code(name)
+        return 128 + sig
     report = format_report(res)
     res["report"] = report
     json_path.parent.mkdir(parents=True, exist_ok=True)
@@ -123,9 +123,4 @@ def run(args: argparse.Namespace) -> int:
     print(report)
     print(f"\nwrote {json_path} and {png}")
     stop = res.get("interrupted")
-    return 0 if stop is None else _exit_code(stop["signal"])
-
-
-def _exit_code(name: str) -> int:
-    """The exit code of a run stopped by signal ``name``, as a shell gives it: 130 (SIGINT), 143 (SIGTERM)."""
-    return 128 + int(getattr(signal, name))
+    return 0 if stop is None else 128 + signal.Signals[stop["signal"]]  # as a shell reports the signal

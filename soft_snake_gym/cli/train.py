@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
 from pathlib import Path
@@ -12,13 +13,13 @@ from soft_snake_gym.config import load_yaml, parse_assignments
 from soft_snake_gym.tables import read_rows
 from soft_snake_gym.training import (
     ALGOS,
-    Terminated,
     TrainConfig,
     check_env_id,
     latest_checkpoint,
     load_train_config,
     planned_steps,
     steps_per_iteration,
+    stopped_by,
     train,
 )
 from soft_snake_gym.training.seeds import parse_seeds, train_seeds
@@ -117,12 +118,13 @@ def run(args: argparse.Namespace) -> int:
     try:
         final = train(cfg, run_dir, resume=bool(args.resume), progress=not args.no_progress)
     except KeyboardInterrupt as err:
-        how = "terminated (SIGTERM)" if isinstance(err, Terminated) else "interrupted"
+        sig = stopped_by(err)
+        how = "terminated (SIGTERM)" if sig == signal.SIGTERM else "interrupted"
         print(
             f"{how}; a checkpoint was saved. Continue with: soft-snake train --resume {run_dir}",
             file=sys.stderr,
         )
-        return 143 if isinstance(err, Terminated) else 130
+        return 128 + sig
     wall = time.time() - t0
     print(f"done in {wall:.0f} s; final model {final}")
     rows = read_rows(run_dir / "learning_curve.csv")

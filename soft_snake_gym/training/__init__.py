@@ -24,6 +24,7 @@ from soft_snake_gym.training.run import (
     plot_learning_curve,
     save_checkpoint,
     sigterm_as_interrupt,
+    stopped_by,
 )
 from soft_snake_gym.training.train import make_train_env, policy_kwargs, torch_for_learning, train
 
@@ -45,6 +46,7 @@ __all__ = [
     "policy_kwargs",
     "save_checkpoint",
     "sigterm_as_interrupt",
+    "stopped_by",
     "steps_per_iteration",
     "torch_for_learning",
     "train",

@@ -52,6 +52,7 @@ __all__ = [
     "plot_learning_curve",
     "save_checkpoint",
     "sigterm_as_interrupt",
+    "stopped_by",
 ]
 
 
@@ -124,6 +125,14 @@ def _checkpoint_walls(run_dir: Path) -> dict[str, float]:
 
 class Terminated(KeyboardInterrupt):
     """Training stopped by SIGTERM (a scheduler or ``kill``): handled as Ctrl-C, a checkpoint is saved first."""
+
+
+def stopped_by(err: KeyboardInterrupt) -> signal.Signals:
+    """The signal behind an interrupt: SIGTERM for :class:`Terminated`, else SIGINT (Ctrl-C).
+
+    A command stopped by it exits with ``128 + stopped_by(err)``, as a shell reports a signal.
+    """
+    return signal.SIGTERM if isinstance(err, Terminated) else signal.SIGINT
 
 
 @contextlib.contextmanager
