@@ -55,6 +55,7 @@ from soft_snake_gym.envs.registration import importable_id
 from soft_snake_gym.envs.vector import ROBOTS_PER_THREAD
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
 from soft_snake_gym.training import load_train_config, policy_kwargs, stopped_by, torch_for_learning
+from soft_snake_gym.vector_width import asks_512_bits
 
 __all__ = ["run_benchmark", "format_report", "DEFAULT_ROBOTS", "DEFAULT_NODES", "ENVPOOL_ROBOTS"]
 
@@ -581,14 +582,14 @@ def _processor() -> str:
 def _code_target() -> dict[str, Any]:
     """What numba compiles for: LLVM's name for the CPU, and whether 512-bit vectors were asked for.
 
-    ``llvm_cpu`` and ``vectors_512`` (``SOFT_SNAKE_GYM_VECTOR_BITS=512``, or any ``-prefer-256-bit``
-    in ``NUMBA_CPU_FEATURES``): the same code runs at different speeds for either, so a result
-    says which it measured.
+    ``llvm_cpu`` and ``vectors_512`` (``SOFT_SNAKE_GYM_VECTOR_BITS=512``, or its feature set in
+    ``NUMBA_CPU_FEATURES`` by hand: ``vector_width.asks_512_bits``): the same code runs at different
+    speeds for either, so a result says which it measured.
     """
     from numba.core.registry import cpu_target
 
     _, name, features = cpu_target.target_context.codegen().magic_tuple()
-    return {"llvm_cpu": name, "vectors_512": "-prefer-256-bit" in features.split(",")}
+    return {"llvm_cpu": name, "vectors_512": asks_512_bits(features)}
 
 
 def _threading_layer() -> str:

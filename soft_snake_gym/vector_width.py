@@ -26,10 +26,17 @@ import os
 from llvmlite import binding
 from numba.core import config
 
-__all__ = ["VECTOR_BITS", "apply_vector_bits"]
+__all__ = ["VECTOR_BITS", "WIDE_FEATURE", "apply_vector_bits", "asks_512_bits"]
 
 VECTOR_BITS = "SOFT_SNAKE_GYM_VECTOR_BITS"
 """The environment variable: 256 (the default, LLVM's choice) or 512."""
+WIDE_FEATURE = "-prefer-256-bit"
+"""The LLVM feature that 512 adds to the host's: LLVM then uses the registers' whole 512 bits."""
+
+
+def asks_512_bits(features: str) -> bool:
+    """True if an LLVM feature string (numba's code generator's, say) holds :data:`WIDE_FEATURE`."""
+    return WIDE_FEATURE in features.split(",")
 
 
 def apply_vector_bits() -> bool:
@@ -52,6 +59,6 @@ def apply_vector_bits() -> bool:
     features = binding.get_host_cpu_features()
     if not features.get("avx512f", False):
         return False
-    env["NUMBA_CPU_FEATURES"] = features.flatten() + ",-prefer-256-bit"
+    env["NUMBA_CPU_FEATURES"] = f"{features.flatten()},{WIDE_FEATURE}"
     config.reload_config()  # numba read its variables at its import
     return True
