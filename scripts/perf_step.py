@@ -39,6 +39,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections import Counter
 
 import gymnasium as gym
 import numpy as np
@@ -101,10 +102,10 @@ def code_ranges(names: dict[int, str]) -> list[tuple[int, int, str]]:
     ]
 
 
-def write_perf_map(names: dict[int, str], path: str) -> None:
-    """``perf``'s map of code made at run time: ``start size name`` a line (:func:`code_ranges`)."""
+def write_perf_map(ranges: list[tuple[int, int, str]], path: str) -> None:
+    """``perf``'s map of code made at run time: ``start size name`` a line, of :func:`code_ranges`."""
     with open(path, "w") as f:
-        for start, size, name in code_ranges(names):
+        for start, size, name in ranges:
             f.write(f"{start:x} {size:x} {name}\n")
 
 
@@ -163,9 +164,7 @@ def instruction_mix(
     ips = subprocess.run(
         ["perf", "script", "-i", data, "-F", "ip"], capture_output=True, text=True, check=True
     ).stdout.split()
-    counts: dict[int, int] = {}
-    for ip in ips:
-        counts[int(ip, 16)] = counts.get(int(ip, 16), 0) + 1
+    counts = Counter(int(ip, 16) for ip in ips)
     by_kind: dict[str, int] = {}
     by_width: dict[str, int] = {}
     code: list[list[tuple[int, int, str]]] = []  # each copy's (offset, samples, instruction)
@@ -186,7 +185,7 @@ def instruction_mix(
                 match = _INSTRUCTION.match(line)
                 if not match:
                     continue
-                hits = counts.get(int(match.group(1), 16), 0)
+                hits = counts[int(match.group(1), 16)]
                 kind, width = instruction_kind(match.group(2), match.group(3))
                 code[-1].append((int(match.group(1), 16) - start, hits, f"{match.group(2)} {match.group(3)}"))
                 by_kind[kind] = by_kind.get(kind, 0) + hits
@@ -257,14 +256,14 @@ def main() -> None:
     env, step = stepper(args.env_id, args.robots, args.threads)
     for _ in range(300):  # every kernel the loop calls is loaded before the map is written
         step()
-    names = numba_symbols()
-    if args.mix and args.mix not in names.values():
+    ranges = code_ranges(numba_symbols())
+    if args.mix and all(name != args.mix for _, _, name in ranges):
         sys.exit(
             f"--mix {args.mix}: no function of that name is compiled for this loop; give one that the "
             "report lists, as soft_snake_gym.physics.lanes.residual"
         )
     map_path = f"/tmp/perf-{os.getpid()}.map"
-    write_perf_map(names, map_path)
+    write_perf_map(ranges, map_path)
     with tempfile.TemporaryDirectory() as tmp:
         data = os.path.join(tmp, "perf.data")
         try:
@@ -306,7 +305,7 @@ def main() -> None:
             text=True,
             check=True,
         ).stdout
-        mix = instruction_mix(data, code_ranges(names), args.mix, args.windows) if args.mix else []
+        mix = instruction_mix(data, ranges, args.mix, args.windows) if args.mix else []
     os.remove(map_path)
     env.close()
     shares: dict[str, float] = {}
