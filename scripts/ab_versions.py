@@ -22,6 +22,7 @@ not of the rounds).
     python scripts/ab_versions.py --base HEAD~1 --rounds 8 --seconds 2
     python scripts/ab_versions.py --base HEAD~1 --robots 8 24 256   # PPO's 8 envs, a tail block, 256
     python scripts/ab_versions.py --base HEAD~1 --processes 5 --rounds 4   # for a change of a few %
+    python scripts/ab_versions.py --base HEAD~1 --integrator bdf2   # the eels on another integrator
 
 The copy lives in ``~/.cache/soft_snake_gym_ab/<commit>`` (its numba cache with it), so a second
 run against the same commit compiles nothing. Both packages register the same env ids; the script
@@ -68,9 +69,14 @@ def base_copy(rev: str) -> Path:
     return home
 
 
-def single(swim, inch, body: str, seconds: float, rng: np.random.Generator):
+def _eel_integrator(body: str, method: str | None) -> dict:
+    """The env keywords of ``--integrator``: for the eels only (the ground has backward Euler alone)."""
+    return {"integrator": {"method": method}} if method and body == "eel" else {}
+
+
+def single(swim, inch, body: str, seconds: float, rng: np.random.Generator, method: str | None = None):
     """A round of the single env of ``body``: steps per second over ``seconds``."""
-    env = (swim.SwimEnv if body == "eel" else inch.InchEnv)()
+    env = (swim.SwimEnv if body == "eel" else inch.InchEnv)(**_eel_integrator(body, method))
     env.reset(seed=0)
     acts = rng.uniform(-1, 1, (1000,) + env.action_space.shape)
 
@@ -87,9 +93,19 @@ def single(swim, inch, body: str, seconds: float, rng: np.random.Generator):
     return run
 
 
-def batched(vector, body: str, n: int, threads: int, seconds: float, rng: np.random.Generator):
+def batched(
+    vector,
+    body: str,
+    n: int,
+    threads: int,
+    seconds: float,
+    rng: np.random.Generator,
+    method: str | None = None,
+):
     """A round of ``n`` robots of ``body`` in the vector env: robot-steps per second over ``seconds``."""
-    env = (vector.SwimVectorEnv if body == "eel" else vector.InchVectorEnv)(num_envs=n, num_threads=threads)
+    env = (vector.SwimVectorEnv if body == "eel" else vector.InchVectorEnv)(
+        num_envs=n, num_threads=threads, **_eel_integrator(body, method)
+    )
     env.reset(seed=0)
     acts = rng.uniform(-1, 1, (50, n) + env.single_action_space.shape)
 
@@ -121,6 +137,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--processes", type=int, default=1, help="fresh processes to repeat it in (default 1; see above)"
     )
+    parser.add_argument(
+        "--integrator",
+        choices=["sdirk2", "bdf2", "backward_euler"],
+        help="the eels' integrator.method (default: the env's; the worms keep theirs)",
+    )
     parser.add_argument("--json", help=argparse.SUPPRESS)  # a process of --processes writes its rates here
     args = parser.parse_args(argv)
     if args.rounds < 1 or not args.seconds > 0 or min(args.robots) < 1 or args.processes < 1:
@@ -134,7 +155,9 @@ def main(argv: list[str] | None = None) -> None:
         runs = [rates]
     else:
         runs = []
-        same = ["--base", args.base, "--rounds", str(args.rounds), "--seconds", str(args.seconds), "--robots"]
+        same = ["--base", args.base, "--rounds", str(args.rounds), "--seconds", str(args.seconds)]
+        same += ["--integrator", args.integrator] if args.integrator else []
+        same += ["--robots"]
         with tempfile.TemporaryDirectory() as tmp:
             for k in range(args.processes):
                 print(f"process {k + 1}/{args.processes}", file=sys.stderr)
@@ -154,12 +177,17 @@ def measure(args: argparse.Namespace) -> dict[str, tuple[list[float], list[float
     rng = np.random.default_rng(0)
     cases = {}
     for body in ("eel", "worm"):
-        cases[f"{body}, single env"] = [single(s, i, body, args.seconds, rng) for s, i, _ in codes.values()]
+        cases[f"{body}, single env"] = [
+            single(s, i, body, args.seconds, rng, args.integrator) for s, i, _ in codes.values()
+        ]
     for n in args.robots:
         for body in ("eel", "worm"):
             for threads in (1, 2) if n >= 64 else (1,):
                 label = f"{n} {body}s, {threads} thread{'s' if threads > 1 else ''}"
-                cases[label] = [batched(v, body, n, threads, args.seconds, rng) for _, _, v in codes.values()]
+                cases[label] = [
+                    batched(v, body, n, threads, args.seconds, rng, args.integrator)
+                    for _, _, v in codes.values()
+                ]
     for now, base in cases.values():  # compile or load the caches outside the rounds
         now()
         base()
@@ -183,7 +211,8 @@ def report(args: argparse.Namespace, runs: list[dict[str, tuple[list[float], lis
     """
     k = len(runs)
     what = f"{args.rounds} rounds" if k == 1 else f"{k} processes of {args.rounds} rounds"
-    print(f"now against {args.base}: steps/s (single envs) or robot-steps/s, medians of {what}")
+    eels = f", the eels on {args.integrator}" if args.integrator else ""
+    print(f"now against {args.base}{eels}: steps/s (single envs) or robot-steps/s, medians of {what}")
     print(
         f"{'case':22s} {'base':>10s} {'now':>10s}  now/base: median (range{'' if k == 1 else ' of processes'})"
     )

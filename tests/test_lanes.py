@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from soft_snake_gym import Fluid, Rod, SimConfig
+from soft_snake_gym import Fluid, Integrator, Rod, SimConfig
 from soft_snake_gym.envs import SoftVectorEnv
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.physics import banded, lanes, stepper
@@ -25,12 +25,14 @@ LANES = lanes.LANES
 DT = stepper.GAMMA * 0.01  # SDIRK2's stage at the default h
 
 
-def _eels(seed: int, steps: int = 30) -> SoftVectorEnv:
-    """16 eels of different physics after ``steps`` random actions.
+def _eels(seed: int, steps: int = 30, method: str = "auto") -> SoftVectorEnv:
+    """16 eels of different physics after ``steps`` random actions, on the integrator ``method``.
 
     Lanes 0-3 without any damping, half the others with stretching damping too.
     """
-    venv = SoftVectorEnv("SoftEel-v0", LANES, num_threads=1, max_episode_steps=None)
+    venv = SoftVectorEnv(
+        "SoftEel-v0", LANES, num_threads=1, max_episode_steps=None, integrator={"method": method}
+    )
     venv.reset(seed=seed)
     for i, sim in enumerate(venv.batch.sims):
         damped = i >= 4
@@ -39,7 +41,9 @@ def _eels(seed: int, steps: int = 30) -> SoftVectorEnv:
             damping_bend=0.5 * (1 + i % 3) if damped else 0.0,
             damping_stretch=20.0 * (i % 2) if damped else 0.0,
         )
-        sim.set_config(SimConfig(fluid=Fluid(rho=900 + 20 * i), rod=rod))
+        sim.set_config(
+            SimConfig(fluid=Fluid(rho=900 + 20 * i), rod=rod, integrator=Integrator(method=method))
+        )
     rng = np.random.default_rng(seed)
     for _ in range(steps):
         venv.advance(rng.uniform(-1, 1, (LANES, 8)), np.ones(LANES, dtype=bool))
@@ -312,6 +316,35 @@ def test_robots_that_fail_inside_a_block_step_end_as_robot_step_leaves_them():
         eels, np.random.default_rng(8).uniform(-1, 1, (4, LANES, 8)), threads=1
     )
     assert status[7] == L.NON_FINITE and status[9] == L.NOT_CONVERGED  # they failed in a stage
+    assert (status == L.OK).sum() == LANES - 2
+
+
+def test_a_bdf2_block_leaves_every_robot_as_robot_step():
+    """BDF2's one stage a sub-step in a block of sixteen eels, over two sub-steps a step.
+
+    Lanes with and without damping; lane 3 without a history (a fresh state: it takes its
+    SDIRK2 step alone, then joins the block), lane 7 with a NaN velocity (it fails), lane 9 with
+    a Newton cap of one iteration, lane 11 renewing its Jacobian (both leave the common path).
+    """
+
+    def eels():
+        venv = _eels(seed=9, method="bdf2")
+        sim = venv.batch.sim
+        assert not np.isnan(sim.buf[:, L.B_QPREV, 0]).any()  # every eel has its history
+        sim.prm[:, L.P_SUBSTEPS] = 2
+        sim.buf[3, L.B_QPREV] = np.nan
+        sim.prm[9, L.P_MAXIT] = 1
+        sim.prm[11, L.P_CHORD] = 0.0
+        sim.v[7, 4] = np.nan
+        return venv
+
+    venv = eels()
+    batch = venv.batch
+    assert all(T.block_eligible(batch.sim.prm[i], batch.task.tp[i]) for i in range(LANES))  # one block
+    status = _blocks_against_robot_step(
+        eels, np.random.default_rng(10).uniform(-1, 1, (4, LANES, 8)), threads=1
+    )
+    assert status[7] == L.NON_FINITE and status[9] == L.NOT_CONVERGED
     assert (status == L.OK).sum() == LANES - 2
 
 

@@ -693,7 +693,7 @@ def _block_scratch(n2):
     z = np.zeros
     return (lanes.allocate(n2), z((lanes.N_LANE_PRM, n)), z((5, n)), z(n), z((3, n)), z(n, dtype=np.int64),
             z(n, dtype=np.int64), z((5, n)), z(n, dtype=np.int64), z(n), z((4, n)), z(n, dtype=np.bool_),
-            z(n, dtype=np.bool_))  # fmt: skip
+            z(n, dtype=np.bool_), z(n))  # fmt: skip
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -727,7 +727,9 @@ def _step_block(active, s, t, status, first, scratch):
         i = first + r
         together &= block_eligible(s.prm[i], t.tp[i])
         together &= (
-            s.prm[i, L.P_H] == s.prm[first, L.P_H] and s.prm[i, L.P_SUBSTEPS] == s.prm[first, L.P_SUBSTEPS]
+            s.prm[i, L.P_H] == s.prm[first, L.P_H]
+            and s.prm[i, L.P_SUBSTEPS] == s.prm[first, L.P_SUBSTEPS]
+            and s.prm[i, L.P_METHOD] == s.prm[first, L.P_METHOD]
         )
     if together:
         block_step(active, s, t, first, status, scratch)
@@ -741,14 +743,14 @@ def _step_block(active, s, t, status, first, scratch):
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def block_eligible(prm, tp):
-    """True if :func:`block_step` takes the robot: a swimmer on SDIRK2, one step of ``h`` per control step.
+    """True if :func:`block_step` takes the robot: a swimmer on SDIRK2 or BDF2, one step of ``h`` per action.
 
     A swimmer's inputs are curvature rates (its rest lengths never move), in water with the
     consistent added mass (``lanes.eligible``).
     """
     return (
         lanes.eligible(prm)
-        and int(prm[L.P_METHOD]) == L.METHOD_SDIRK2
+        and (int(prm[L.P_METHOD]) == L.METHOD_SDIRK2 or int(prm[L.P_METHOD]) == L.METHOD_BDF2)
         and int(tp[T_NSUB]) == 1
         and int(tp[T_KIND]) == SWIM
     )
@@ -756,33 +758,40 @@ def block_eligible(prm, tp):
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def block_step(active, s, t, first, status, scratch):
-    """:func:`robot_step` for the ``active`` robots of the ``LANES`` from ``first``, each SDIRK2 stage at once.
+    """:func:`robot_step` for the ``active`` robots of the ``LANES`` from ``first``, each stage at once.
 
-    Every robot must be :func:`block_eligible`, with the same ``h`` and sub-steps; ``scratch`` is
-    :func:`_block_scratch`'s. It is :func:`robot_step` with ``stepper.simulate``'s step of SDIRK2
-    sub-steps written out: each robot's task start and end and the step's end are the same
-    functions, the stages run in the block (``lanes.stage_start``, ``lanes.newton``,
-    ``lanes.stage_end``) in the scalar kernels' order of operations, and the sums are
-    ``simulate``'s, so every robot ends bit for bit as :func:`robot_step` leaves it (all but
-    ``buf``'s ``lanes.STAGE_ROWS``, the stages' work, which no step reads before it writes them).
-    A robot whose step fails is put back whole at once (``lanes.put``); the others' state after
-    their last stage (``lanes.put_state``). An inactive robot's
+    Every robot must be :func:`block_eligible`, with the same ``h``, sub-steps and method;
+    ``scratch`` is :func:`_block_scratch`'s. It is :func:`robot_step` with ``stepper.simulate``'s
+    step of SDIRK2 or BDF2 sub-steps written out: each robot's task start and end and the step's
+    end are the same functions, the stages run in the block (``lanes.stage_start`` or
+    ``lanes.bdf2_start``, ``lanes.newton``, ``lanes.stage_end``) in the scalar kernels' order of
+    operations, and the sums are ``simulate``'s, so every robot ends bit for bit as
+    :func:`robot_step` leaves it (all but ``buf``'s ``lanes.STAGE_ROWS``, the stages' work, which
+    no step reads before it writes them). A robot whose step fails is put back whole at once
+    (``lanes.put``); the others' state after their last stage (``lanes.put_state``). Under BDF2 a
+    robot without a history (a fresh state, which ``simulate`` starts with an SDIRK2 step) takes
+    its step alone, by :func:`robot_step`, and its lane idles. An inactive robot's
     lane idles: the block computes it as it does a lane whose action is bad, and puts nothing of
     it back (:func:`batch_step` leaves that robot alone). So do the lanes past the last robot in
     the tail block, where ``lanes.take`` copies the last robot in again.
     """
     n_lanes = lanes.LANES
-    x, p, result, sq, before, state, iters, acc, niter, resid, energy, go, ran = scratch
+    x, p, result, sq, before, state, iters, acc, niter, resid, energy, go, ran, act0 = scratch
     state[:] = L.OK  # each robot's status in the step
     niter[:] = 0  # simulate's sums over the sub-steps
     resid[:] = 0.0
     energy[:] = 0.0
+    bdf2 = int(s.prm[first, L.P_METHOD]) == L.METHOD_BDF2
     count = min(n_lanes, status.size - first)
     for r in range(n_lanes):
         if r >= count or not active[first + r]:
             state[r] = _IDLE
             continue
         si, ti = _robot(s, t, first + r)
+        if bdf2 and math.isnan(si.buf[L.B_QPREV, 0]):
+            status[first + r] = robot_step(si, ti)
+            state[r] = _IDLE
+            continue
         sq[r] = step_begin(si, ti)
         if sq[r] != sq[r]:
             state[r] = BAD_ACTION
@@ -792,14 +801,32 @@ def block_step(active, s, t, first, status, scratch):
             L.copy_into(si.buf[L.B_LRATE, : si.lbar.size], ti.ul)
         si.out[L.O_NJAC] = si.out[L.O_NRES] = si.out[L.O_NFACTOR] = 0.0
     lanes.take(s, t.uk, first, x, p)
+    if bdf2:
+        lanes.take_history(s, first, x)
     nsub = int(s.prm[first, L.P_SUBSTEPS])
     dt = s.prm[first, L.P_H] / nsub  # as stepper.simulate
     for _ in range(nsub):
         for r in range(n_lanes):
-            ran[r] = state[r] == L.OK
+            ran[r] = go[r] = state[r] == L.OK
             iters[r] = 0
             acc[:, r] = 0.0  # a sub-step's residual, fluid, damping and friction energy, actuator work
-        for stage in range(2):  # stepper._sdirk2_substep
+        if bdf2 and go.any():  # stepper._bdf2_substep and implicit_energies
+            lanes.bdf2_start(x, p, dt)
+            for r in range(n_lanes):
+                act0[r] = x.power[0, r]
+            lanes.newton(s, first, go, x, p, 2.0 * dt / 3.0, result)
+            lanes.stage_end(x, p, 1)
+            for r in range(n_lanes):
+                if go[r]:
+                    state[r], iters[r], acc[0, r] = int(result[0, r]), int(result[1, r]), result[2, r]
+                    p_damp = x.power[1, r] if stepper.is_damped(s.prm[first + r]) else 0.0
+                    acc[1, r], acc[2, r], acc[3, r], acc[4, r] = stepper.implicit_sums(
+                        dt, act0[r], x.power[0, r], p_damp, result[3, r], result[4, r]
+                    )
+                    if state[r] != L.OK:
+                        lanes.put(s, first + r, x, r, x.v)
+                        lanes.put_history(s, first + r, x, r)
+        for stage in range(0 if bdf2 else 2):  # stepper._sdirk2_substep
             for r in range(n_lanes):
                 go[r] = state[r] == L.OK
             if not go.any():
@@ -837,6 +864,8 @@ def block_step(active, s, t, first, status, scratch):
         together = state[r] == L.OK  # else put back earlier: the block moved on
         if together:
             lanes.put_state(s, i, x, r, x.v)
+            if bdf2:
+                lanes.put_history(s, i, x, r)
         st = stepper.end_step(
             si, state[r], niter[r], resid[r], energy[0, r], energy[1, r], energy[2, r], energy[3, r]
         )

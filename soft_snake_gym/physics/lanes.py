@@ -1,14 +1,14 @@
-"""Sixteen robots per instruction: SDIRK2's stages in water for a block at once; worms' steps, a lane each.
+"""Sixteen robots per instruction: implicit stages in water for a block at once; worms' steps, a lane each.
 
 The batched env (``envs.task.batch_step``) steps its swimmers in blocks of :data:`LANES`. In a
-block every robot runs the same arithmetic on its own numbers, so each SDIRK2 stage is done for
-the whole block with each robot in one lane of the CPU's vector registers: the stage's start
-(:func:`stage_start`), its Newton solve (:func:`newton`: the residual with its Jacobian, the
-banded factorization and the solves), its end (:func:`stage_end`: the powers, and the
-curvatures for the observation), then the energies (:func:`energies`). :func:`take` copies the
-robots into a :class:`Block` once a step and :func:`put` copies them back. LLVM vectorizes a
-loop over the lanes only in one form, found with ``scripts/probe_soa.py`` (docs/performance_history.md,
-"Sixteen eels per instruction"):
+block every robot runs the same arithmetic on its own numbers, so each SDIRK2 stage (or BDF2's
+one stage a step) is done for the whole block with each robot in one lane of the CPU's vector
+registers: the stage's start (:func:`stage_start`, :func:`bdf2_start`), its Newton solve
+(:func:`newton`: the residual with its Jacobian, the banded factorization and the solves), its
+end (:func:`stage_end`: the powers, and the curvatures for the observation), then the energies
+(:func:`energies`). :func:`take` copies the robots into a :class:`Block` once a step and
+:func:`put` copies them back. LLVM vectorizes a loop over the lanes only in one form, found with
+``scripts/probe_soa.py`` (docs/performance_history.md, "Sixteen eels per instruction"):
 
 - every array of the block is flat, element ``i`` of lane ``r`` at ``i * LANES + r`` (a band
   entry (row, col) at ``(row * BAND + col) * LANES + r``), strides that are compile-time
@@ -74,6 +74,7 @@ from soft_snake_gym.physics.layout import (
     B_MINV,
     B_P0,
     B_Q0,
+    B_QPREV,
     B_R,
     B_V0,
     B_VACC,
@@ -160,7 +161,8 @@ class Block(NamedTuple):
     ``on`` and how each ended ``done``; the stage's actuator and damping power per lane
     ``power`` (2, LANES), the curvatures and their rates at the stage's end ``curv`` (2 (N-2)
     rows), and the energies at the step's end ``energy`` (3, LANES). On the ground
-    (:func:`crawl`) ``stuck`` is 1 for a node held at rest, else 0 (``ibuf[I_FRICTION]``).
+    (:func:`crawl`) ``stuck`` is 1 for a node held at rest, else 0 (``ibuf[I_FRICTION]``). Under
+    BDF2, ``qprev`` is the last step's start (``buf[B_QPREV]``: :func:`take_history`).
     """
 
     q: np.ndarray
@@ -193,6 +195,7 @@ class Block(NamedTuple):
     energy: np.ndarray
     stuck: np.ndarray
     minv: np.ndarray
+    qprev: np.ndarray
 
 
 @njit(cache=True, inline="always")
@@ -642,7 +645,7 @@ def allocate(n2):
                  z(n), z(n2 * BAND * LANES), z(n), z(n), z(4 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
                  z((N_LANE_RES, LANES)), z(LANES, dtype=np.bool_), z(LANES, dtype=np.bool_),
                  z(LANES, dtype=np.int64), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z((2, LANES)), z(2 * (N - 2) * LANES),
-                 z((3, LANES)), z(N * LANES), z(n))  # fmt: skip
+                 z((3, LANES)), z(N * LANES), z(n), z(n))  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -730,6 +733,22 @@ def put(s, i, x, r, v):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
+def take_history(s, first, x):
+    """BDF2's history of robots ``first`` .. ``first + LANES - 1``, ``buf[B_QPREV]``, into ``x.qprev``."""
+    for r in range(LANES):
+        i = min(first + r, s.q.shape[0] - 1)
+        for k in range(s.q.shape[1]):
+            x.qprev[_ix(k, r)] = s.buf[i, B_QPREV, k]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def put_history(s, i, x, r):
+    """Lane ``r``'s BDF2 history back into robot ``i`` (:func:`bdf2_start` made it this step's start)."""
+    for k in range(s.q.shape[1]):
+        s.buf[i, B_QPREV, k] = x.qprev[_ix(k, r)]
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
 def stage_start(x, p, stage, dt):
     """``stepper.sdirk2_stage_start`` in water for every lane: the rest shape moved, the stage's solve set up.
 
@@ -766,6 +785,44 @@ def stage_start(x, p, stage, dt):
         v[k] = v0[k] + change
 
 
+@njit(cache=True, error_model="numpy", _nrt=False)
+def bdf2_start(x, p, dt):
+    """``stepper``'s start of a BDF2 step of ``dt`` in water for every lane, as ``simulate`` makes it.
+
+    ``move_rest_shape``: the actuator power at the start into ``x.power[0]``, then the rest shape
+    moved (``kbar`` alone, as in :func:`stage_start`). ``_bdf2_substep`` up to its solve: the
+    start recorded and the velocity extrapolated (``_be_start``), the water's momentum there, and
+    the backward-Euler stage of ``2 dt / 3`` set up from ``(4 y_n - y_(n-1)) / 3`` for the
+    position, the velocity and the momentum, with ``y_(n-1)`` the last step's start (``qprev``,
+    the velocity ``v0``, which ``vstep`` keeps); both then hold this step's start. Every lane
+    must have its history (``stepper.simulate`` starts a fresh state with an SDIRK2 step).
+    """
+    q, v, q0, v0, p0, A, E, vstep, qprev = x.q, x.v, x.q0, x.v0, x.p0, x.A, x.E, x.vstep, x.qprev
+    n2 = q.size // LANES
+    _edge_geometry(q, E, n2)
+    _actuator_power(x, p)
+    for k in range(x.kbar.size):
+        x.kbar[k] += dt * x.uk[k]
+    for k in range(q.size):
+        vstep[k] = v0[k]
+        q0[k] = q[k]
+        v_prev = v0[k]
+        v0[k] = v[k]
+        v[k] += 1.0 * (v[k] - v_prev)
+        p0[k] = 0.0
+        A[k] = 0.0
+    _momentum(E, v0, p, p0, n2)  # E is q0's: q0 is q
+    _edge_geometry(qprev, E, n2)
+    _momentum(E, vstep, p, A, n2)
+    for k in range(q.size):
+        p0[k] += (p0[k] - A[k]) / 3.0
+        qn, vn = q0[k], v0[k]
+        q0[k] += (qn - qprev[k]) / 3.0
+        v0[k] += (vn - vstep[k]) / 3.0
+        qprev[k] = qn
+        vstep[k] = vn
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def _momentum(E, v, p, P, n2):
     """Add the water's momentum ``P_f`` of every lane to ``P`` (``fluid_momentum`` with ``sp = 1``, ``sg = 0``)."""
@@ -784,26 +841,15 @@ def stage_end(x, p, stage):
     The damping terms are summed for every lane, a zero added in place of a term where
     ``damping_power`` skips it.
     """
-    q, v, E, kbar, lbar, uk, lrate, power = x.q, x.v, x.E, x.kbar, x.lbar, x.uk, x.lrate, x.power
+    q, v, E, power = x.q, x.v, x.E, x.power
     n2 = q.size // LANES
     N = n2 // 2
     if stage == 1:
         layout.copy_into(x.v0, x.vstep)
     _edge_geometry(q, E, n2)
+    _actuator_power(x, p)
     for r in range(LANES):
-        power[0, r] = 0.0
         power[1, r] = 0.0
-    for j in range(1, N - 1):
-        for r in range(LANES):
-            EI = p[L_EI, r]
-            lv = 0.5 * (lbar[_ix(j - 1, r)] + lbar[_ix(j, r)])
-            dk = _turning(E, j, r)[0] - kbar[_ix(j - 1, r)]
-            power[0, r] -= EI / lv * dk * uk[_ix(j - 1, r)]
-            power[0, r] -= 0.25 * EI * dk * dk / (lv * lv) * (lrate[_ix(j - 1, r)] + lrate[_ix(j, r)])
-    for k in range(N - 1):
-        for r in range(LANES):
-            ratio = E[_ix(4 * k, r)] / lbar[_ix(k, r)]
-            power[0, r] -= 0.5 * p[L_EA, r] * (ratio * ratio - 1.0) * lrate[_ix(k, r)]
     for k in range(N - 1):
         for r in range(LANES):
             ex = q[_ix(2 * k + 2, r)] - q[_ix(2 * k, r)]
@@ -821,6 +867,26 @@ def stage_end(x, p, stage):
             x.curv[_ix(N - 3 + j, r)] = kd
             db = p[L_DB, r]
             power[1, r] += db * kd * kd if db > 0.0 else 0.0
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _actuator_power(x, p):
+    """``forces.actuator_power`` of every lane into ``x.power[0]``, in its order, from the edges in ``E``."""
+    E, kbar, lbar, uk, lrate, power = x.E, x.kbar, x.lbar, x.uk, x.lrate, x.power
+    N = x.q.size // LANES // 2
+    for r in range(LANES):
+        power[0, r] = 0.0
+    for j in range(1, N - 1):
+        for r in range(LANES):
+            EI = p[L_EI, r]
+            lv = 0.5 * (lbar[_ix(j - 1, r)] + lbar[_ix(j, r)])
+            dk = _turning(E, j, r)[0] - kbar[_ix(j - 1, r)]
+            power[0, r] -= EI / lv * dk * uk[_ix(j - 1, r)]
+            power[0, r] -= 0.25 * EI * dk * dk / (lv * lv) * (lrate[_ix(j - 1, r)] + lrate[_ix(j, r)])
+    for k in range(N - 1):
+        for r in range(LANES):
+            ratio = E[_ix(4 * k, r)] / lbar[_ix(k, r)]
+            power[0, r] -= 0.5 * p[L_EA, r] * (ratio * ratio - 1.0) * lrate[_ix(k, r)]
 
 
 @njit(cache=True, inline="always", error_model="numpy")

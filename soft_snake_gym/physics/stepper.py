@@ -832,6 +832,12 @@ def implicit_energies(s, u_k, dt, p_act0, p_fluid, p_fric):
     edge_geometry(q, geo)
     p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
     p_damp = damping_power(q, v, prm, geo) if is_damped(prm) else 0.0
+    return implicit_sums(dt, p_act0, p_act1, p_damp, p_fluid, p_fric)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def implicit_sums(dt, p_act0, p_act1, p_damp, p_fluid, p_fric):
+    """:func:`implicit_energies`' energies from its powers (``envs.task.block_step``'s under BDF2 too)."""
     return dt * p_fluid, dt * p_damp, dt * p_fric, 0.5 * dt * (p_act0 + p_act1)
 
 
