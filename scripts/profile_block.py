@@ -44,7 +44,7 @@ PARTS = (
 @njit
 def _cut(s, t, first, scratch, stop):
     """``block_step``'s parts for the block from ``first`` up to part ``stop`` (1-based), one sub-step."""
-    x, p, result, sq, before, state, iters, acc, niter, resid, energy, go, ran = scratch
+    x, p, result, sq, before, state, iters, acc, niter, resid, energy, go, ran, _ = scratch
     part = 0
     for r in range(lanes.LANES):
         si, ti = T._robot(s, t, first + r)
