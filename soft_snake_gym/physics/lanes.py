@@ -835,11 +835,12 @@ def _momentum(E, v, p, P, n2):
 def stage_end(x, p, stage):
     """The lanes' part of ``stepper.sdirk2_stage_end``: the powers at the stage's end, into ``x.power``.
 
-    The step's start velocity back in ``v0`` after stage 1, the edge geometry of ``q`` into ``E``,
-    ``forces.actuator_power`` into ``power[0]`` and ``forces.damping_power`` into ``power[1]``,
-    in their order of operations; on the way, the curvatures and their rates into ``x.curv``.
-    The damping terms are summed for every lane, a zero added in place of a term where
-    ``damping_power`` skips it.
+    Also the end of a BDF2 step (``stage`` 1), whose energies take the same powers
+    (``stepper.implicit_energies``). The step's start velocity back in ``v0`` after stage 1,
+    the edge geometry of ``q`` into ``E``, ``forces.actuator_power`` into ``power[0]`` and
+    ``forces.damping_power`` into ``power[1]``, in their order of operations; on the way, the
+    curvatures and their rates into ``x.curv``. The damping terms are summed for every lane, a
+    zero added in place of a term where ``damping_power`` skips it.
     """
     q, v, E, power = x.q, x.v, x.E, x.power
     n2 = q.size // LANES
