@@ -6,9 +6,13 @@ parts of ``block_step`` in its order (each robot's task start, ``lanes.take``, e
 and ``lanes.put``, each robot's step end, ledger and task end) and stops after part ``k``,
 every pass from the same saved state; a part's cost is the difference of the cuts after and
 before it. The whole ``block_step`` is timed the same way, as a check on the sum. Medians of
-interleaved rounds, in µs per eel.
+interleaved rounds, in µs per eel. ``--integrator bdf2`` cuts BDF2's step instead: one stage
+(``lanes.bdf2_start``, ``lanes.newton``, ``lanes.stage_end``) for SDIRK2's two; an eel reset
+in the 40 steps has no history and takes its next step alone in the whole ``block_step``,
+while the cuts step its lane with the others.
 
     python scripts/profile_block.py              # ~1 min once compiled
+    python scripts/profile_block.py --integrator bdf2
 """
 
 from __future__ import annotations
@@ -39,12 +43,21 @@ PARTS = (
     "ledger",
     "task end (observation, reward, metrics)",
 )
+PARTS_BDF2 = (
+    "task start (rates from actions)",
+    "take: robots and history into the block",
+    "BDF2 start",
+    "Newton",
+    "end (powers, sums)",
+    *PARTS[-4:],
+)
 
 
 @njit
 def _cut(s, t, first, scratch, stop):
     """``block_step``'s parts for the block from ``first`` up to part ``stop`` (1-based), one sub-step."""
-    x, p, result, sq, before, state, iters, acc, niter, resid, energy, go, ran, _ = scratch
+    x, p, result, sq, before, state, iters, acc, niter, resid, energy, go, ran, act0 = scratch
+    bdf2 = int(s.prm[first, L.P_METHOD]) == L.METHOD_BDF2
     part = 0
     for r in range(lanes.LANES):
         si, ti = T._robot(s, t, first + r)
@@ -55,11 +68,32 @@ def _cut(s, t, first, scratch, stop):
     if part == stop:
         return
     lanes.take(s, t.uk, first, x, p)
+    if bdf2:
+        lanes.take_history(s, first, x)
     part += 1
     dt = s.prm[first, L.P_H]
     go[:] = True
     state[:] = L.OK
-    for stage in range(2):
+    if bdf2:
+        if part == stop:
+            return
+        lanes.bdf2_start(x, p, dt)
+        act0[:] = x.power[0]
+        part += 1
+        if part == stop:
+            return
+        lanes.newton(s, first, go, x, p, 2.0 * dt / 3.0, result)
+        part += 1
+        if part == stop:
+            return
+        lanes.stage_end(x, p, 1)
+        for r in range(lanes.LANES):
+            state[r], iters[r], acc[0, r] = int(result[0, r]), int(result[1, r]), result[2, r]
+            acc[1, r], acc[2, r], acc[3, r], acc[4, r] = stepper.implicit_sums(
+                dt, act0[r], x.power[0, r], x.power[1, r], result[3, r], result[4, r]
+            )
+        part += 1
+    for stage in range(0 if bdf2 else 2):
         if part == stop:
             return
         lanes.stage_start(x, p, stage, dt)
@@ -83,6 +117,8 @@ def _cut(s, t, first, scratch, stop):
     lanes.energies(x, p)
     for r in range(lanes.LANES):
         lanes.put_state(s, first + r, x, r, x.v)
+        if bdf2:
+            lanes.put_history(s, first + r, x, r)
     part += 1
     if part == stop:
         return
@@ -120,9 +156,11 @@ def main() -> None:
     parser.add_argument("--robots", type=int, default=256)
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--passes", type=int, default=200)
+    parser.add_argument("--integrator", choices=["sdirk2", "bdf2"], default="sdirk2")
     args = parser.parse_args()
     n = args.robots
-    venv = gym.make_vec("SoftEel-v0", num_envs=n, num_threads=1)
+    parts = PARTS_BDF2 if args.integrator == "bdf2" else PARTS
+    venv = gym.make_vec("SoftEel-v0", num_envs=n, num_threads=1, integrator={"method": args.integrator})
     venv.reset(seed=0)
     rng = np.random.default_rng(0)
     for _ in range(40):
@@ -131,7 +169,7 @@ def main() -> None:
     t.act[:] = rng.uniform(-1, 1, t.act.shape)
     saved = (s.f.copy(), s.ibuf.copy(), t.f.copy())
     status = np.zeros(n, dtype=np.int64)
-    cuts = list(range(len(PARTS) + 1)) + [-1]
+    cuts = list(range(len(parts) + 1)) + [-1]
     times = {c: [] for c in cuts}
     for c in cuts:
         _loop(1, s, t, *saved, status, c)
@@ -141,9 +179,12 @@ def main() -> None:
             _loop(args.passes, s, t, *saved, status, c)
             times[c].append((time.perf_counter() - start) / args.passes / n * 1e6)
     us = {c: float(np.median(v)) for c, v in times.items()}
-    print(f"{n} eels, one thread, µs per eel (medians of {args.rounds} rounds of {args.passes} passes):")
+    print(
+        f"{n} eels on {args.integrator}, one thread, µs per eel "
+        f"(medians of {args.rounds} rounds of {args.passes} passes):"
+    )
     total = 0.0
-    for k, name in enumerate(PARTS, start=1):
+    for k, name in enumerate(parts, start=1):
         part = us[k] - us[k - 1]
         total += part
         print(f"  {name:42s} {part:6.3f}")
