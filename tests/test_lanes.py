@@ -348,6 +348,23 @@ def test_a_bdf2_block_leaves_every_robot_as_robot_step():
     assert (status == L.OK).sum() == LANES - 2
 
 
+def test_eight_bdf2_eels_step_as_a_tail_block_as_robot_step_leaves_them():
+    """PPO's eight envs under BDF2: one tail block, its lanes past the eighth idle, some eels failing."""
+
+    def eels():
+        venv = SoftVectorEnv(
+            "SoftEel-v0", 8, max_episode_steps=None, max_curvature_rate=30.0, integrator={"method": "bdf2"}
+        )
+        venv.reset(seed=3)
+        assert T._units(8) == 1  # one block of eight, not eight robots one by one
+        return venv
+
+    status = _blocks_against_robot_step(
+        eels, np.random.default_rng(12).uniform(-1, 1, (200, 8, 8)), threads=1
+    )
+    assert (status == L.OK).sum() >= 4 and (status != L.OK).any()  # most swim, some fail
+
+
 def _blocks_against_robot_step(make, actions: np.ndarray, threads: int, any_nan: bool = False) -> np.ndarray:
     """Step the robots of ``make()`` through ``actions`` by ``batch_step`` and robot by robot.
 
