@@ -763,14 +763,7 @@ def stage_start(x, p, stage, dt):
     for k in range(x.kbar.size):
         x.kbar[k] += stage_dt * x.uk[k]
     if stage == 0:
-        for k in range(q.size):
-            q0[k] = q[k]
-            v_prev = v0[k]
-            v0[k] = v[k]
-            v[k] += stepper.GAMMA * (v[k] - v_prev)
-            p0[k] = 0.0
-        _edge_geometry(q0, E, n2)
-        _momentum(E, v0, p, p0, n2)
+        _be_start(x, p, stepper.GAMMA)
         return
     c = (1.0 - stepper.GAMMA) / stepper.GAMMA
     A[:] = 0.0
@@ -789,29 +782,24 @@ def stage_start(x, p, stage, dt):
 def bdf2_start(x, p, dt):
     """``stepper``'s start of a BDF2 step of ``dt`` in water for every lane, as ``simulate`` makes it.
 
-    ``move_rest_shape``: the actuator power at the start into ``x.power[0]``, then the rest shape
-    moved (``kbar`` alone, as in :func:`stage_start`). ``_bdf2_substep`` up to its solve: the
-    start recorded and the velocity extrapolated (``_be_start``), the water's momentum there, and
-    the backward-Euler stage of ``2 dt / 3`` set up from ``(4 y_n - y_(n-1)) / 3`` for the
-    position, the velocity and the momentum, with ``y_(n-1)`` the last step's start (``qprev``,
-    the velocity ``v0``, which ``vstep`` keeps); both then hold this step's start. Every lane
-    must have its history (``stepper.simulate`` starts a fresh state with an SDIRK2 step).
+    ``move_rest_shape``: the actuator power at the start, of the rest shape not moved yet, into
+    ``x.power[0]``, and the rest shape moved (``kbar`` alone, as in :func:`stage_start`).
+    ``_bdf2_substep`` up to its solve: the start recorded, the velocity extrapolated and the
+    water's momentum there (:func:`_be_start`), and the backward-Euler stage of ``2 dt / 3`` set
+    up from ``(4 y_n - y_(n-1)) / 3`` for the position, the velocity and the momentum, with
+    ``y_(n-1)`` the last step's start (``qprev``, the velocity ``v0``, which ``vstep`` keeps);
+    both then hold this step's start. Every lane must have its history (``stepper.simulate``
+    starts a fresh state with an SDIRK2 step).
     """
-    q, v, q0, v0, p0, A, E, vstep, qprev = x.q, x.v, x.q0, x.v0, x.p0, x.A, x.E, x.vstep, x.qprev
+    q, q0, v0, p0, A, E, vstep, qprev = x.q, x.q0, x.v0, x.p0, x.A, x.E, x.vstep, x.qprev
     n2 = q.size // LANES
-    _edge_geometry(q, E, n2)
-    _actuator_power(x, p)
+    for k in range(q.size):
+        vstep[k] = v0[k]  # the last step's start velocity, before _be_start moves v0 on
+        A[k] = 0.0
+    _be_start(x, p, 1.0)
+    _actuator_power(x, p)  # of q, whose edges _be_start left in E (q0 is q), and the unmoved kbar
     for k in range(x.kbar.size):
         x.kbar[k] += dt * x.uk[k]
-    for k in range(q.size):
-        vstep[k] = v0[k]
-        q0[k] = q[k]
-        v_prev = v0[k]
-        v0[k] = v[k]
-        v[k] += 1.0 * (v[k] - v_prev)
-        p0[k] = 0.0
-        A[k] = 0.0
-    _momentum(E, v0, p, p0, n2)  # E is q0's: q0 is q
     _edge_geometry(qprev, E, n2)
     _momentum(E, vstep, p, A, n2)
     for k in range(q.size):
@@ -821,6 +809,26 @@ def bdf2_start(x, p, dt):
         v0[k] += (vn - vstep[k]) / 3.0
         qprev[k] = qn
         vstep[k] = vn
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _be_start(x, p, extrapolate):
+    """``stepper._be_start`` in water for every lane: the start recorded, the first guess, the momentum.
+
+    ``q0``, ``v0`` the state, the velocity extrapolated from the last start by ``extrapolate``
+    (SDIRK2's first stage ``GAMMA``, BDF2 1), and the water's momentum at the start into ``p0``;
+    ``E`` is left the edges of ``q0``.
+    """
+    q, v, q0, v0, p0, E = x.q, x.v, x.q0, x.v0, x.p0, x.E
+    n2 = q.size // LANES
+    for k in range(q.size):
+        q0[k] = q[k]
+        v_prev = v0[k]
+        v0[k] = v[k]
+        v[k] += extrapolate * (v[k] - v_prev)
+        p0[k] = 0.0
+    _edge_geometry(q0, E, n2)
+    _momentum(E, v0, p, p0, n2)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
