@@ -474,23 +474,24 @@ def run_benchmark(
     node_rows: list[dict[str, Any]] = []
     phase = "the kernel shares"
     try:
-        if interrupted is None:
+        if interrupted is None:  # else the rounds were cut short: nothing more is measured
             for n in robots:
                 name = f"SoftEel-v0 batched n={n} threads=1"
                 say(f"kernel share: {name}")
                 shares[name] = _kernel_share(cases[name], seconds)
-        _close(cases)
-        if ppo and interrupted is None:
-            phase = "the PPO rounds"
-            say(f"PPO with the batched env and with SubprocVecEnv, {repeats} interleaved rounds")
-            ppo_rows = time_ppo("SoftEel-v0", ppo_n_envs, ppo_timesteps, repeats)
-        for N in nodes if interrupted is None else ():
-            phase = f"the cost per step at N = {N}"
-            say(phase)
-            node_rows.append(time_nodes(N, node_robots, seconds))
+            _close(cases)
+            if ppo:
+                phase = "the PPO rounds"
+                say(f"PPO with the batched env and with SubprocVecEnv, {repeats} interleaved rounds")
+                ppo_rows = time_ppo("SoftEel-v0", ppo_n_envs, ppo_timesteps, repeats)
+            for N in nodes:
+                phase = f"the cost per step at N = {N}"
+                say(phase)
+                node_rows.append(time_nodes(N, node_robots, seconds))
     except KeyboardInterrupt as err:
-        _close(cases)
         interrupted = _stop(err, f"in {phase}; every measurement before it is kept")
+    finally:
+        _close(cases)  # closes nothing if closed already
 
     res: dict[str, Any] = {
         "machine": {
