@@ -32,7 +32,7 @@ import soft_snake_gym  # noqa: F401 - registers the ids
 from soft_snake_gym.envs import observe
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
-from soft_snake_gym.physics import banded, layout, stepper
+from soft_snake_gym.physics import banded, geometry, layout, stepper
 from soft_snake_gym.physics.layout import SimArrays
 
 ROBOTS, STEPS = 64, 40  # robot steps per batched part: ROBOTS * STEPS
@@ -105,6 +105,7 @@ def _loop_observe(k, q, v, kbar, w, low, high, raw, obs):
     s = 0.0
     geo = np.empty((2, q.size))
     for _ in range(k):
+        geometry.edge_geometry(q, geo)  # counted with the observation, as before steps left it made
         s += observe.swim_observation(q, v, kbar, w, 0.0, low, high, raw, obs, geo)
     return s
 

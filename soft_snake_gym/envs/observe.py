@@ -90,10 +90,10 @@ def swim_observation(q, v, kbar, w, goal, low, high, raw, out, geo):
     sin of ``goal`` minus the heading).
 
     Writes the unclipped values (float64) into ``raw`` and, clipped to ``[low, high]``, into
-    ``out`` (float32); ``geo`` (2, 2N) is scratch for the edge geometry. Returns the heading [rad].
+    ``out`` (float32); ``geo`` is the edge geometry of ``q`` (``geometry.edge_geometry``, which
+    a step leaves in ``buf[B_GEO]``). Returns the heading [rad].
     """
     n = kbar.size
-    geometry.edge_geometry(q, geo)
     geometry.curvatures_and_rates_at(geo, v, raw[:n], raw[n : 2 * n])
     return swim_observation_curved(q, v, kbar, w, goal, low, high, raw, out)
 
@@ -122,10 +122,9 @@ def inch_observation(q, v, lbar, friction, ground, w, low, high, raw, out, geo):
 
     Edge_lengths (N-1), edge_length_rates (N-1), lbar (N-1), stuck (N, 0/1 from the friction states
     ``friction``; all 0 unless ``ground``), com_velocity_body (2). Same outputs as
-    :func:`swim_observation` (``geo`` the same scratch); returns the heading [rad].
+    :func:`swim_observation` (``geo`` the edge geometry of ``q``); returns the heading [rad].
     """
     m = lbar.size
-    geometry.edge_geometry(q, geo)  # one square root an edge for both blocks (libm's hypot is slower)
     for k in range(m):
         raw[k] = geo[0, 2 * k]
         tx, ty = geo[1, 2 * k], geo[1, 2 * k + 1]

@@ -1421,8 +1421,8 @@ def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
     while True:
         phase = wi[W_PHASE, r]
         if phase == _STEP:
-            if wi[W_STEP, r] == wi[W_NSTEPS, r]:
-                stepper.ledger_energies(si)
+            if wi[W_STEP, r] == wi[W_NSTEPS, r]:  # its last sub-step's powers left q's geometry
+                stepper.ledger_energies(si, True)
                 return _ENDED, _STEP, False
             wi[W_NITER, r], wi[W_SUB, r] = 0, 0
             for k in range(W_RESID, N_WORK):

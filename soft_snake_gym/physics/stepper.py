@@ -576,13 +576,15 @@ def _symplectic_substep(s, dt, medium):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def ledger_energies(s):
+def ledger_energies(s, geo_made=False):
     """Write the body's energies, the water's ``T_f`` and the energy ledger into ``out``.
 
     The body's kinetic and elastic energy and the water's ``T_f`` (0 out of water) go into
     ``out[O_E_KIN]``, ``out[O_E_ELASTIC]``, ``out[O_T_FLUID]`` [J], and the energy ledger since the
     start recorded at ``O_L0_*`` into ``out[O_LEDGER:]`` (``LEDGER_KEYS``); ``s`` is
-    :class:`~soft_snake_gym.physics.layout.SimArrays` or the plain tuple of its arrays.
+    :class:`~soft_snake_gym.physics.layout.SimArrays` or the plain tuple of its arrays. Leaves
+    the edge geometry of ``q`` in ``buf[B_GEO]``, where the observation reads it; ``geo_made``:
+    it is there already (the end of an implicit step leaves it), so it is not made again.
     """
     s = borrowed_arrays(s)  # no reference counting inside (layout.borrowed)
     q, v, kbar, lbar, prm, buf, out = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.out
@@ -592,7 +594,8 @@ def ledger_energies(s):
         ke += 0.5 * m[i] * v[i] * v[i]
     out[O_E_KIN] = ke
     geo = buf[B_GEO : B_GEO + 2]
-    edge_geometry(q, geo)  # one square root an edge: the energy from q took about three
+    if not geo_made:
+        edge_geometry(q, geo)  # one square root an edge: the energy from q took about three
     out[O_E_ELASTIC] = elastic_energy(geo, kbar, lbar, prm)
     out[O_T_FLUID] = fluid_kinetic_energy(q, v, prm) if int(prm[P_MEDIUM]) == MEDIUM_WATER else 0.0
     ledger(out)
@@ -917,7 +920,8 @@ def simulate(s, u_k, u_l, n_steps):
         status = end_step(s, status, niter, resid, e_fluid, e_damp, e_fric, e_act)
         if status != OK:
             break
-    ledger_energies(s)
+    # a step that ended well ended in its powers, at q: implicit_energies or sdirk2_stage_end
+    ledger_energies(s, n_steps > 0 and status == OK and not symplectic)
     return status
 
 
