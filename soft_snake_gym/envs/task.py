@@ -277,9 +277,9 @@ def episode_metrics(r: Any, keys: tuple[str, ...]) -> dict[str, Any]:
 def _observe(s, t, curved):
     """The observation into ``t.obs``; returns the heading.
 
-    ``s.buf[B_GEO]`` holds the edge geometry of ``q``, as every step leaves it
-    (``stepper.ledger_energies``); ``curved``: a swimmer's curvatures and their rates are
-    already in ``t.raw``.
+    ``s.buf[B_GEO]`` holds the edge geometry of ``q``, as every step and every state written from
+    outside leave it (``stepper.ledger_energies``, which ``start_from_state`` calls too);
+    ``curved``: a swimmer's curvatures and their rates are already in ``t.raw``.
     """
     if int(t.tp[T_KIND]) == SWIM:
         if int(t.tp[T_TASK]) != TASK_DIRECTION:  # the distance to the target or the cross-track error
@@ -408,7 +408,6 @@ def robot_reset(s, t):
         rs[R_S0] = rs[R_S]
         rs[M_N2] = math.inf  # time to goal: not reached yet
     _metrics(s.out, s.prm, t.tp, rs)
-    geometry.edge_geometry(s.q, s.buf[L.B_GEO : L.B_GEO + 2])  # a state from outside: made here
     rs[R_HEADING] = _observe(s, t, False)
 
 
