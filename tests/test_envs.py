@@ -456,6 +456,31 @@ def test_seeded_noisy_starts_differ_but_stay_small():
     np.testing.assert_array_equal(env.unwrapped.sim.kbar, 0.0)
 
 
+@pytest.mark.parametrize("env_id", ["SoftEel-v0", "SoftWorm-v0"])
+def test_a_noisy_start_is_the_starting_state_of_the_docstring_drawn_by_rng_uniform(env_id):
+    """The compiled start draws ``U(-s, s)`` as ``rng.uniform`` does, in the documented order, bit for bit."""
+    s, worm = 0.05, env_id == "SoftWorm-v0"
+    env = gym.make(env_id, reset_noise_scale=s, **({"rest_length_limits": [0.98, 1.02]} if worm else {}))
+    base = env.unwrapped
+    N, l0 = base.N, base.base_config.rod.edge_length
+    for seed in range(4):
+        env.reset(seed=seed)
+        rng = np.random.default_rng(seed)
+        kappa = rng.uniform(-s, s, N - 2)  # about the straight rest shape
+        lbar = np.full(N - 1, l0)
+        if worm:
+            lbar = lbar * (1.0 + rng.uniform(-s, s, N - 1))
+        x = body_from_curvature(kappa, lbar, heading=rng.uniform(-s, s))
+        sim = base.sim
+        np.testing.assert_array_equal(sim.x, x)
+        np.testing.assert_array_equal(sim.v, 0.0)
+        np.testing.assert_array_equal(sim.kbar, 0.0)
+        np.testing.assert_array_equal(sim.lbar, np.clip(lbar, *base.lbar_limits) if worm else lbar)
+        assert base.np_random.bit_generator.state == rng.bit_generator.state  # nothing more drawn
+    if worm:  # a 5 % noise reaches the +-2 % limits: the body keeps its drawn lengths
+        assert not np.array_equal(sim.lbar, lbar) and sim.lbar.max() == base.lbar_limits[1]
+
+
 def test_randomization_draws_physics_per_episode_and_reports_it():
     ranges = {
         "E": [1.0e6, 3.0e6],

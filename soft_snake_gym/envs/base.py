@@ -28,7 +28,7 @@ from soft_snake_gym.envs.render import BodyRenderer, require_interactive_backend
 from soft_snake_gym.envs.settings import BaseSettings, resolve_settings
 from soft_snake_gym.envs.task import TaskArrays
 from soft_snake_gym.params import SimConfig, check_number
-from soft_snake_gym.physics import Simulator, body_from_curvature
+from soft_snake_gym.physics import Simulator
 from soft_snake_gym.physics.layout import LEDGER_KEYS, O_LEDGER, O_NITER, O_NSTEPS, OK, STATUS_REASONS
 
 __all__ = ["SoftRobotEnv"]
@@ -72,7 +72,7 @@ class SoftRobotEnv(gym.Env):
 
     Subclasses set ``medium``, ``settings_class``, ``env_id``, ``medium_energy_key``,
     ``medium_power_key``, ``shape_key`` and implement the hooks ``_setup_task``,
-    ``_build_spaces``, ``_action_params``, ``_initial_body``, ``_shape_views`` and
+    ``_build_spaces``, ``_action_params``, ``_start_body``, ``_shape_views`` and
     ``_check_options``.
 
     Attributes:
@@ -250,10 +250,11 @@ class SoftRobotEnv(gym.Env):
         """
         raise NotImplementedError
 
-    def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
-        """The episode's body when ``reset`` is given none: ``x``, ``v``, ``kbar``, ``lbar``.
+    def _start_body(self, rng: np.random.Generator) -> None:
+        """Start ``sim`` at the episode's body when ``reset`` is given none, drawn from ``rng``.
 
-        As ``Simulator.start`` takes them, which checks nothing: built right by the env.
+        With ``Simulator.start`` or ``Simulator.start_near_rest``, which check nothing: the env
+        builds the body right.
         """
         raise NotImplementedError
 
@@ -379,7 +380,7 @@ class SoftRobotEnv(gym.Env):
     def start_episode(self, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
         """:meth:`reset` without its observation and info: the body, the task and the draws.
 
-        What the vector env's autoreset calls for a robot (a reset's info is about 3 of its 22 µs):
+        What the vector env's autoreset calls for a robot (a reset's info is about 3 of its 10 µs):
         it reads the observation from the batch and ``randomized`` (the drawn physics) from
         here, and never steps a robot through this object, which needs :meth:`reset_info`'s state.
         """
@@ -409,7 +410,7 @@ class SoftRobotEnv(gym.Env):
             self._check_options(body)
             self.sim.reset(**body)  # checks the body, fills in its missing parts
         else:
-            self.sim.start(**self._initial_body(self.np_random))
+            self._start_body(self.np_random)
         self._reset_task(self.np_random)
 
         self._failure = None
@@ -582,17 +583,3 @@ class SoftRobotEnv(gym.Env):
         self._trail_com.append(self._com)
         self._trail_head.append((q[-2], q[-1]))
         self._last_x = self.sim.x
-
-    def _noisy_straight_body(self, rng, kbar0: np.ndarray, lbar: np.ndarray, length_noise: bool):
-        """A body near rest.
-
-        Curvatures ``kbar0 + U(-s, s)``, chord heading ``U(-s, s)`` (about +x, whatever the goal),
-        rest lengths ``lbar (1 + U(-s, s))`` if ``length_noise``; at rest.
-        """
-        s = self.settings.reset_noise_scale
-        kappa0 = kbar0 + rng.uniform(-s, s, kbar0.shape)
-        if length_noise:
-            lbar = lbar * (1.0 + rng.uniform(-s, s, lbar.shape))
-        heading = rng.uniform(-s, s)
-        x = body_from_curvature(kappa0, lbar, heading=heading)
-        return {"x": x, "v": np.zeros_like(x), "kbar": kbar0.copy(), "lbar": lbar}

@@ -177,6 +177,7 @@ class InchEnv(SoftRobotEnv):
         self.max_length_rate = float(s.max_length_rate) * self.base_config.rod.edge_ratio
         l0 = self.base_config.rod.edge_length
         self.lbar_limits = (s.rest_length_limits[0] * l0, s.rest_length_limits[1] * l0)
+        self._kbar_initial, self._lbar_initial = np.zeros(self.N - 2), np.full(self.N - 1, l0)  # straight
 
     def _build_spaces(self) -> None:
         s = self.settings
@@ -216,15 +217,11 @@ class InchEnv(SoftRobotEnv):
         energy = T.ENERGY_MEDIUM if self.settings.energy_source == "friction" else T.ENERGY_ACTUATOR
         return T.INCH, self.max_length_rate, lo, hi, energy
 
-    def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
-        body = self._noisy_straight_body(
-            rng,
-            np.zeros(self.N - 2),
-            np.full(self.N - 1, self.base_config.rod.edge_length),
-            length_noise=True,
+    def _start_body(self, rng: np.random.Generator) -> None:
+        scale = self.settings.reset_noise_scale
+        self.sim.start_near_rest(
+            self._kbar_initial, self._lbar_initial, rng, scale, lbar_limits=self.lbar_limits
         )
-        np.clip(body["lbar"], *self.lbar_limits, out=body["lbar"])
-        return body
 
     def _check_options(self, body: dict[str, np.ndarray]) -> None:
         lbar = body.get("lbar")

@@ -222,6 +222,7 @@ class SwimEnv(SoftRobotEnv):
         n = self.N - 2
         alpha, delta, _ = serpenoid_on_nodes(s.serpenoid_alpha, s.serpenoid_delta, self.N, rod.design_nodes)
         self._kbar_initial = np.zeros(n)
+        self._lbar_initial = np.full(self.N - 1, rod.edge_length)
         if s.initial_shape == "serpenoid":
             psi = serpenoid_phase(0.0, n, 0.0, delta)
             self._kbar_initial = serpenoid(psi, 0.0, alpha)[0]
@@ -281,12 +282,13 @@ class SwimEnv(SoftRobotEnv):
         k = self.max_rest_curvature
         return T.SWIM, self.max_curvature_rate, -k, k, T.ENERGY_ACTUATOR
 
-    def _initial_body(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
-        lbar = np.full(self.N - 1, self.base_config.rod.edge_length)
+    def _start_body(self, rng: np.random.Generator) -> None:
+        lbar = self._lbar_initial
         if self._on_gait:  # exactly on the gait, at rest, no noise
             x = body_from_curvature(self._kbar_initial, lbar)
-            return {"x": x, "v": np.zeros_like(x), "kbar": self._kbar_initial.copy(), "lbar": lbar}
-        return self._noisy_straight_body(rng, self._kbar_initial, lbar, length_noise=False)
+            self.sim.start(x, np.zeros_like(x), self._kbar_initial, lbar)
+            return
+        self.sim.start_near_rest(self._kbar_initial, lbar, rng, self.settings.reset_noise_scale)
 
     def _check_options(self, body: dict[str, np.ndarray]) -> None:
         kbar = body.get("kbar")

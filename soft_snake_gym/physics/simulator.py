@@ -158,6 +158,25 @@ def _body(kbar, lbar, heading, comx, comy):
     return x
 
 
+@njit(cache=True, error_model="numpy")
+def _start_near_rest(s, kbar, lbar, u, scale, length_noise, lbar_min, lbar_max):
+    """:meth:`Simulator.start_near_rest`'s arithmetic: each draw ``-scale + 2 scale u``, as ``rng.uniform`` makes it."""
+    low, span = -scale, scale - -scale
+    nk, nl = kbar.size, lbar.size
+    kappa = np.empty(nk)
+    for j in range(nk):
+        kappa[j] = kbar[j] + (low + span * u[j])
+    rest = lbar.copy()
+    if length_noise:
+        for j in range(nl):
+            rest[j] = lbar[j] * (1.0 + (low + span * u[nk + j]))
+    x = _body(kappa, rest, low + span * u[u.size - 1], 0.0, 0.0)  # the body of the unclipped lengths
+    if length_noise:
+        for j in range(nl):
+            rest[j] = min(max(rest[j], lbar_min), lbar_max)
+    stepper.restart(s, x, np.zeros_like(x), kbar, rest)
+
+
 @njit(cache=True, error_model="numpy", _nrt=False)
 def _simulate(f, ibuf, u_k, u_l, n_steps):
     """``stepper.simulate`` of the robot over its blocks ``f`` and ``ibuf`` (:meth:`Simulator.advance`).
@@ -277,6 +296,29 @@ class Simulator:
         here; :meth:`reset` checks what it is given, then calls this.
         """
         stepper.restart(tuple(self.arrays), x, v, kbar, lbar)
+        self.failure = None
+
+    def start_near_rest(
+        self,
+        kbar: np.ndarray,
+        lbar: np.ndarray,
+        rng: np.random.Generator,
+        scale: float,
+        lbar_limits: tuple[float, float] | None = None,
+    ) -> None:
+        """:meth:`start` at rest near the rest shape ``kbar`` (N-2,), ``lbar`` (N-1,), drawn from ``rng``.
+
+        The body is bent to the curvatures ``kbar + U(-scale, scale)`` along the edges ``lbar``, or,
+        with ``lbar_limits``, along ``lbar (1 + U(-scale, scale))``, which the rest lengths then take,
+        clipped to ``lbar_limits``; its chord points along ``U(-scale, scale)`` [rad], its centre of
+        mass at the origin. The draws are ``rng.uniform(-scale, scale, ...)``'s numbers, in that
+        order (one ``rng.random`` call), and the body :func:`body_from_curvature`'s, in one compiled
+        call. ``kbar`` and ``lbar``: C-contiguous float64, as :meth:`start` takes them.
+        """
+        length_noise = lbar_limits is not None
+        lo, hi = lbar_limits if length_noise else (0.0, 0.0)
+        draws = rng.random(kbar.size + (lbar.size if length_noise else 0) + 1)
+        _start_near_rest(tuple(self.arrays), kbar, lbar, draws, float(scale), length_noise, lo, hi)
         self.failure = None
 
     def set_state(self, x=None, v=None, kbar=None, lbar=None, lbar_dot=None) -> None:
