@@ -264,8 +264,8 @@ def test_the_block_takes_as_many_chord_steps_as_be_newton_up_to_its_cap():
 def test_units_cover_every_robot_once_with_a_tail_block_from_tail_min():
     """``batch_step``'s units: full blocks, then the robots left a block of their own from ``TAIL_MIN`` on."""
     for n in range(1, 3 * LANES + 1):
-        units = T._units(n)
-        firsts = [T._first_robot(u, n) for u in range(units + 1)]
+        units = T.units(n)
+        firsts = [T.first_robot(u, n) for u in range(units + 1)]
         sizes = [b - a for a, b in zip(firsts, firsts[1:], strict=False)]
         assert firsts[0] == 0 and firsts[-1] == n
         rest = n % LANES
@@ -356,7 +356,7 @@ def test_eight_bdf2_eels_step_as_a_tail_block_as_robot_step_leaves_them():
             "SoftEel-v0", 8, max_episode_steps=None, max_curvature_rate=30.0, integrator={"method": "bdf2"}
         )
         venv.reset(seed=3)
-        assert T._units(8) == 1  # one block of eight, not eight robots one by one
+        assert T.units(8) == 1  # one block of eight, not eight robots one by one
         return venv
 
     status = _blocks_against_robot_step(

@@ -240,6 +240,31 @@ def test_bad_arguments_are_explained():
     assert np.array_equal(venv.step(np.zeros((2, 8)))[0].shape, (2, 28))  # still usable
 
 
+def test_a_refused_step_changes_nothing_not_even_the_resets_it_was_due_to_make():
+    """Bad actions are refused before any work: a robot due to start again is not reset twice."""
+
+    def run(refused: bool) -> SoftVectorEnv:
+        venv = SoftVectorEnv("SoftEel-v0", 2, max_episode_steps=2)
+        venv.reset(seed=4)
+        a = np.full((2, 8), 0.3)
+        venv.step(a)
+        venv.reset_robot(1, seed=9)  # robot 1's episode starts a step later than robot 0's
+        _, _, _, truncated, _ = venv.step(a)
+        assert truncated.tolist() == [True, False]  # robot 0 starts again in the next step
+        if refused:
+            bad = a.copy()
+            bad[1, 0] = np.inf  # robot 1 steps in it
+            with pytest.raises(ValueError, match=r"non-finite entries for robots \[1\]"):
+                venv.step(bad)
+        venv.step(a)
+        return venv
+
+    plain, refused = run(False), run(True)
+    for arrays in ("sim", "task"):
+        assert getattr(plain.batch, arrays).f.tobytes() == getattr(refused.batch, arrays).f.tobytes()
+    assert plain.envs[0].np_random.bit_generator.state == refused.envs[0].np_random.bit_generator.state
+
+
 def test_returned_arrays_are_not_the_env_buffers():
     venv = SoftVectorEnv("SoftEel-v0", 2)
     obs, _ = venv.reset(seed=0)

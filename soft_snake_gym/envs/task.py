@@ -4,8 +4,9 @@ Action to inputs, physics step, observation, reward terms and running metrics, i
 
 ``SoftEel-v0`` and ``SoftWorm-v0`` call :func:`robot_step` for their one robot (through
 :func:`robot_step_blocks`, which takes the arrays as the blocks they are views of); the batched
-vector env (:mod:`soft_snake_gym.envs.vector`) calls :func:`batch_step`, a ``prange`` loop of
-the same :func:`robot_step` over robots, so a robot's results are bitwise the same in both.
+vector env (:mod:`soft_snake_gym.envs.vector`) runs :func:`step_units` on each of its threads,
+the same :func:`robot_step` over a run of robots, so a robot's results are bitwise the same in
+both. :func:`batch_step` is that ``prange`` loop without the env's bookkeeping around it.
 Resets stay in Python (seeded noise, randomization draws) and end with :func:`robot_reset`.
 
 Per robot, the kernels take the simulator's :class:`~soft_snake_gym.physics.SimArrays` and the
@@ -39,6 +40,9 @@ __all__ = [
     "robot_reset",
     "batch_step",
     "batch_step_serial",
+    "step_units",
+    "units",
+    "first_robot",
     "episode_metrics",
     "METRIC_KEYS",
     "NAV_METRIC_KEYS",
@@ -46,8 +50,9 @@ __all__ = [
     "TERM_KEYS",
 ]
 
-# the cached kernels embed the code of every kernel they call
-drop_stale_cache(__file__, [m.__file__ for m in (banded, forces, geometry, L, lanes, stepper, observe)])
+KERNEL_SOURCES = [m.__file__ for m in (banded, forces, geometry, L, lanes, stepper, observe)]
+"""The files whose kernels this module's kernels call: their cached code embeds those kernels."""
+drop_stale_cache(__file__, KERNEL_SOURCES)
 
 # --- task constants tp ------------------------------------------------------------------------
 SWIM, INCH = 0, 1
@@ -564,23 +569,23 @@ def batch_step(active, s, t, status, threads):
     For every robot ``i`` with ``active[i]``, of stacked simulator arrays ``s`` and task arrays
     ``t`` (leading robot axis); robot ``i``'s status into ``status[i]``. The robots go in blocks
     of ``lanes.LANES`` (:func:`block_step`), the rest one by one; each thread takes one run of
-    them (as ``prange`` would, :func:`_step_units`).
+    them (as ``prange`` would, :func:`step_units`).
     """
-    units = _units(status.size)
-    parts = max(1, min(threads, units))
+    count = units(status.size)
+    parts = max(1, min(threads, count))
     for c in prange(parts):
-        _step_units(active, s, t, status, c * units // parts, (c + 1) * units // parts)
+        step_units(active, s, t, status, c * count // parts, (c + 1) * count // parts)
 
 
 @njit(cache=True, error_model="numpy")
 def batch_step_serial(active, s, t, status):
     """:func:`batch_step` on the calling thread alone (no thread-pool launch: for one thread)."""
-    _step_units(active, s, t, status, 0, _units(status.size))
+    step_units(active, s, t, status, 0, units(status.size))
 
 
 @njit(cache=True, error_model="numpy")
-def _step_units(active, s, t, status, first, end):
-    """Units ``first`` .. ``end - 1`` of :func:`_units` on one thread, in its own :func:`_block_scratch`.
+def step_units(active, s, t, status, first, end):
+    """Units ``first`` .. ``end - 1`` of :func:`units` on one thread, in its own :func:`_block_scratch`.
 
     ``s``, ``t``: the plain tuples :func:`batch_step` takes, borrowed here (:func:`_borrowed_stacks`;
     numba's parallel pass does not take borrowed arrays).
@@ -589,7 +594,7 @@ def _step_units(active, s, t, status, first, end):
     active, status = L.borrowed((active, status))
     owned = _block_scratch(s.q.shape[1])
     scratch = L.borrowed(owned)
-    lo, hi = _first_robot(first, status.size), _first_robot(end, status.size)
+    lo, hi = first_robot(first, status.size), first_robot(end, status.size)
     if _crawls(active, s, lo, hi):
         _crawl(active, s, t, status, lo, hi, scratch)
         return owned
@@ -670,15 +675,15 @@ def _blocks(n):
 
 
 @njit(cache=True, inline="always")
-def _units(n):
+def units(n):
     """The units of work of ``n`` robots: the :func:`_blocks`, then each robot left over."""
     blocks = _blocks(n)
     return blocks + max(0, n - blocks * lanes.LANES)
 
 
 @njit(cache=True, inline="always")
-def _first_robot(u, n):
-    """The first robot of unit ``u`` of :func:`_units` (``n`` for ``u`` past the last)."""
+def first_robot(u, n):
+    """The first robot of unit ``u`` of :func:`units` (``n`` for ``u`` past the last)."""
     blocks = _blocks(n)
     return min(u * lanes.LANES, n) if u <= blocks else blocks * lanes.LANES + u - blocks
 
@@ -700,9 +705,9 @@ def _block_scratch(n2):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _step_unit(active, s, t, status, u, scratch):
-    """Unit ``u`` of :func:`_units`: a block (:func:`_step_block`) or one robot past the last block.
+    """Unit ``u`` of :func:`units`: a block (:func:`_step_block`) or one robot past the last block.
 
-    Inlined into :func:`_step_units`, as :func:`_step_block` is: called, they cost about 0.7 µs
+    Inlined into :func:`step_units`, as :func:`_step_block` is: called, they cost about 0.7 µs
     a block before any robot stepped (16 calls of :func:`_step_block` 11.5 µs, the same choice
     written inline 0.7 µs: docs/performance_history.md, "Blocks copy only what a step reads; the
     block's choice inlined"), and 256 eels stepped 1.05 times slower.

@@ -9,10 +9,14 @@ Design: the robots' physics and task arrays are stacked along a leading robot ax
 :class:`~soft_snake_gym.envs.task.TaskArrays` with a leading axis, and one
 :class:`~soft_snake_gym.physics.Simulator` per robot over views of them); each robot also has
 an ordinary :class:`~soft_snake_gym.envs.SwimEnv`/:class:`~soft_snake_gym.envs.InchEnv` object
-over views of those arrays. A step runs :func:`~soft_snake_gym.envs.task.batch_step`, a ``prange`` loop of
-the very kernel a single env's ``step`` calls; a reset calls that robot's env object's
-``reset`` (seeded noise, randomization draws), so robot ``i`` seeded ``s + i`` is bitwise the
-robot of ``gym.make(env_id)`` seeded ``s + i`` under the same actions, for any thread count.
+over views of those arrays. A step is one compiled call, a ``prange`` loop over numba's threads
+(:func:`_step`): each thread takes its robots' actions, steps them with the very kernel a single
+env's ``step`` calls (``task.step_units``), moves their episodes on and writes what the step
+returns of them into a :class:`Snapshot`, so that the calling thread reads none of the robots'
+rows (a row it reads is one the stepping thread must fetch back). A reset calls that robot's env
+object's ``reset`` (seeded noise, randomization draws), so robot ``i`` seeded ``s + i`` is
+bitwise the robot of ``gym.make(env_id)`` seeded ``s + i`` under the same actions, for any
+thread count.
 """
 
 from __future__ import annotations
@@ -20,14 +24,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
 from gymnasium.spaces import Box
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
-from numba import njit
+from numba import njit, prange
 
 from soft_snake_gym.envs import task as T
 from soft_snake_gym.envs.base import SoftRobotEnv
@@ -38,7 +42,7 @@ from soft_snake_gym.envs.settings import resolve_settings
 from soft_snake_gym.envs.swim import SwimEnv
 from soft_snake_gym.envs.task import TaskArrays
 from soft_snake_gym.params import SimConfig, check_int
-from soft_snake_gym.physics import SimArrays, Simulator, allocate_arrays, layout
+from soft_snake_gym.physics import SimArrays, Simulator, allocate_arrays
 from soft_snake_gym.physics.cache import drop_stale_cache
 from soft_snake_gym.physics.layout import (
     N_LEDGER,
@@ -73,81 +77,172 @@ _FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
 ROBOTS_PER_THREAD = 64
 """Default threads: one per this many robots, at most ``NUMBA_NUM_THREADS``."""
 
-drop_stale_cache(__file__, [layout.__file__])  # the cached step passes embed layout's indices
+drop_stale_cache(__file__, [T.__file__, *T.KERNEL_SOURCES])  # the cached step embeds the task's kernels
 
 
-@njit(cache=True)
-def _start_step(actions, act, stepping, out, shape, prev, prev_shape, status):
-    """Before a batched step: ``actions`` into ``act``; the first stepping robot with a non-finite one (-1 if none).
-
-    ``actions`` are float32 (a policy's) or float64, converted as they are copied (in the same
-    pass as the check, instead of numpy's casting assignment before it). If no action is bad,
-    records each robot's step count and Newton iterations (``out``) into ``prev`` (n, 2) and its
-    rest ``shape`` into ``prev_shape`` (what a robot whose step fails reports), and sets every
-    ``status`` to ``OK``. One compiled pass instead of a dozen array operations, whose calls
-    cost more than the work at hundreds of robots.
-    """
-    n, k = act.shape
-    bad = -1
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _bad_action(actions, stepping):
+    """The first stepping robot with a non-finite action, -1 if none (``actions`` alone is read)."""
+    n, k = actions.shape
     for i in range(n):
         finite = True
-        for j in range(k):  # copy and check in one pass, without a branch per entry
-            a = actions[i, j]
-            act[i, j] = a
-            finite &= math.isfinite(a)
-        if not finite and stepping[i] and bad < 0:
-            bad = i
-    if bad >= 0:
-        return bad
-    m = shape.shape[1]
-    for i in range(n):
-        prev[i, 0] = out[i, O_NSTEPS]
-        prev[i, 1] = out[i, O_NITER]
-        for j in range(m):
-            prev_shape[i, j] = shape[i, j]
-        status[i] = OK
+        for j in range(k):  # without a branch per entry
+            finite &= math.isfinite(actions[i, j])
+        if not finite and stepping[i]:
+            return i
     return -1
 
 
-@njit(cache=True)
-def _finish_step(status, stepping, reward, success, on_success, elapsed, returns, max_steps):
-    """After a batched step: ``(terminated, truncated, failures)`` and the episode counters moved on.
+class Snapshot(NamedTuple):
+    """What a batched step's ``info`` and observation are made of, robot by robot, in arrays of their own.
 
-    A robot terminates on a failed step (``status``) or, with ``on_success``, on ``success``;
-    each stepping robot's ``elapsed`` steps and ``returns`` grow by its step and ``reward``, and
-    it is truncated at ``max_steps`` (0: no limit). ``failures`` counts the failed steps.
+    The threads that step the robots write them, each for its own robots, while the robots'
+    rows are in its caches: a row the calling thread reads is one the stepping thread must
+    fetch back before its next write (256 robots on two threads step 1.06 times faster so:
+    docs/performance_history.md, "The robots' rows stay with their thread"). The robots that
+    start again in a step are reset before it and taken with the others; :meth:`SoftVectorEnv.reset`
+    and ``SAME_STEP``'s resets, which come after a step, take theirs again.
+
+    Attributes:
+        rows: the task state ``rs`` transposed, (N_RS, n).
+        time: simulated time [s], (n,).
+        niter: Newton iterations of the last step, (n,).
+        shape: the driven rest shape, (n, N-2) or (n, N-1).
+        failed: the robot stepped and its step failed (it reports its last valid state), (n,).
+        ledger: the energy ledger, (N_LEDGER, n).
+        obs: the observation, (n, n_obs) float32.
+        raw: the leading columns of the observation unclipped that the info reads, (n, n_raw).
     """
+
+    rows: np.ndarray
+    time: np.ndarray
+    niter: np.ndarray
+    shape: np.ndarray
+    failed: np.ndarray
+    ledger: np.ndarray
+    obs: np.ndarray
+    raw: np.ndarray
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _snapshot(rs, out, shape, prev, prev_shape, status, stepped, h, obs, raw, lo, hi, snap):
+    """Robots ``lo`` .. ``hi - 1`` into ``snap`` (a :class:`Snapshot`'s arrays).
+
+    A robot that ``stepped`` and whose ``status`` is not ``OK`` reports its last valid state,
+    as the single env does: the step count and iterations ``prev`` (n, 2) and the rest shape
+    ``prev_shape`` recorded before its step. ``h``: each robot's step [s].
+    """
+    rows, time_s, niter, shape_out, failed, ledger, obs_out, raw_out = snap
+    for i in range(lo, hi):
+        failed[i] = stepped[i] and status[i] != OK
+        if failed[i]:
+            steps, it, src = prev[i, 0], prev[i, 1], prev_shape
+        else:
+            steps, it, src = out[i, O_NSTEPS], out[i, O_NITER], shape
+        time_s[i] = steps * h[i]
+        niter[i] = int(it)
+        for j in range(shape.shape[1]):
+            shape_out[i, j] = src[i, j]
+        for j in range(obs.shape[1]):
+            obs_out[i, j] = obs[i, j]
+        for j in range(raw_out.shape[1]):
+            raw_out[i, j] = raw[i, j]
+    for r in range(rs.shape[1]):  # row by row: the writes run along a row (2 KB apart robot by robot)
+        for i in range(lo, hi):
+            rows[r, i] = rs[i, r]
+    for r in range(N_LEDGER):
+        for i in range(lo, hi):
+            ledger[r, i] = out[i, O_LEDGER + r]
+
+
+@njit(cache=True, error_model="numpy")
+def _step_part(actions, stepping, s, t, status, shape, book, ends, rewards, snap, first, end):
+    """Units ``first`` .. ``end - 1`` of a batched step (``task.units``), on the thread that owns their robots.
+
+    Before the physics (``task.step_units``), each robot's action is copied into ``act``
+    (float32 converted as it is copied) and its step count, iterations and rest shape recorded
+    in ``prev`` and ``prev_shape``, its ``status`` set to ``OK``. After it, each robot's episode
+    moves on (``book``'s counters; :func:`_finish`) and its :class:`Snapshot` is taken.
+    """
+    prev, prev_shape, elapsed, returns, on_success, max_steps = book
+    sa, ta = SimArrays(*s), TaskArrays(*t)
+    act, out = ta.act, sa.out
     n = status.size
-    terminated = np.zeros(n, dtype=np.bool_)
-    truncated = np.zeros(n, dtype=np.bool_)
-    failures = 0
-    for i in range(n):
-        if status[i] != OK:
-            terminated[i] = True
-            failures += 1
+    lo, hi = T.first_robot(first, n), T.first_robot(end, n)
+    for i in range(lo, hi):
+        for j in range(act.shape[1]):
+            act[i, j] = actions[i, j]
+        prev[i, 0] = out[i, O_NSTEPS]
+        prev[i, 1] = out[i, O_NITER]
+        for j in range(shape.shape[1]):
+            prev_shape[i, j] = shape[i, j]
+        status[i] = OK
+    T.step_units(stepping, s, t, status, first, end)
+    _finish(status, stepping, ta.rs, on_success, elapsed, returns, max_steps, ends, rewards, lo, hi)
+    h = sa.prm[:, P_H]
+    _snapshot(ta.rs, out, shape, prev, prev_shape, status, stepping, h, ta.obs, ta.raw, lo, hi, snap)
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _finish(status, stepping, rs, on_success, elapsed, returns, max_steps, ends, rewards, lo, hi):
+    """Robots ``lo`` .. ``hi - 1`` after their step: ``ends`` (3, n) terminated, truncated, done; ``rewards``.
+
+    A robot terminates on a failed step or, with ``on_success``, on success; each stepping
+    robot's ``elapsed`` steps and ``returns`` grow by its step and reward (0 for a robot not
+    stepped), and it is truncated at ``max_steps`` (0: no limit).
+    """
+    for i in range(lo, hi):
+        terminated = status[i] != OK
+        truncated = False
+        reward = 0.0
         if stepping[i]:
-            if on_success and success[i] > 0.0:
-                terminated[i] = True
+            reward = rs[i, T.R_REWARD]
+            if on_success and rs[i, T.R_SUCCESS] > 0.0:
+                terminated = True
             elapsed[i] += 1
-            returns[i] += reward[i]
-            truncated[i] = max_steps > 0 and elapsed[i] >= max_steps
-    return terminated, truncated, failures
+            returns[i] += reward
+            truncated = max_steps > 0 and elapsed[i] >= max_steps
+        ends[0, i], ends[1, i], ends[2, i] = terminated, truncated, terminated or truncated
+        rewards[i] = reward
 
 
-@njit(cache=True)
-def _step_outputs(stepping, reward, terminated, truncated):
-    """A step's rewards (0 for a robot not stepped), its episode ends, and whether any episode ended."""
-    n = stepping.size
-    rewards = np.zeros(n)
-    dones = np.empty(n, dtype=np.bool_)
-    for i in range(n):
-        if stepping[i]:
-            rewards[i] = reward[i]
-        dones[i] = terminated[i] or truncated[i]
-    return rewards, dones, dones.any()
+@njit(cache=True, error_model="numpy")
+def _new_snapshot(t, shape, n_raw):
+    """New arrays for a :class:`Snapshot` of the robots of task arrays ``t`` (the infos hold them: new each step)."""
+    ta = TaskArrays(*t)
+    n, k = ta.rs.shape
+    snap = (np.empty((k, n)), np.empty(n), np.empty(n, dtype=np.int64), np.empty_like(shape),
+            np.empty(n, dtype=np.bool_), np.empty((N_LEDGER, n)), np.empty_like(ta.obs), np.empty((n, n_raw)))  # fmt: skip
+    return snap, np.empty((3, n), dtype=np.bool_), np.empty(n)
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True, error_model="numpy")
+def _step(actions, stepping, s, t, status, shape, book, n_raw, threads):
+    """A batched step over ``threads`` of numba's threads, each taking one run of units (:func:`_step_part`).
+
+    Returns the step's :class:`Snapshot` arrays, its ends (3, n) (terminated, truncated, done),
+    its rewards and whether any episode ended.
+    """
+    snap, ends, rewards = _new_snapshot(t, shape, n_raw)
+    count = T.units(status.size)
+    parts = max(1, min(threads, count))
+    for c in prange(parts):
+        _step_part(
+            actions, stepping, s, t, status, shape, book, ends, rewards, snap, c * count // parts,
+            (c + 1) * count // parts,
+        )  # fmt: skip
+    return snap, ends, rewards, ends[2].any()
+
+
+@njit(cache=True, error_model="numpy")
+def _step_serial(actions, stepping, s, t, status, shape, book, n_raw):
+    """:func:`_step` on the calling thread alone (no thread-pool launch: for one thread)."""
+    snap, ends, rewards = _new_snapshot(t, shape, n_raw)
+    _step_part(actions, stepping, s, t, status, shape, book, ends, rewards, snap, 0, T.units(status.size))
+    return snap, ends, rewards, ends[2].any()
+
+
+@njit(cache=True, error_model="numpy")
 def _episode_stats(dones, returns, elapsed, starts, now):
     """Return, length and wall-clock seconds (to the microsecond) of the episodes that end, 0 elsewhere."""
     n = dones.size
@@ -160,23 +255,16 @@ def _episode_stats(dones, returns, elapsed, starts, now):
     return r, l, t
 
 
-@njit(cache=True)
-def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, reset, h):
-    """The arrays a batched ``info`` is made of, in one compiled pass (see :func:`_start_step`).
+@njit(cache=True, error_model="numpy")
+def _info_rows(rows, failed, ledger, stepped, reset):
+    """What a batched ``info`` makes of a :class:`Snapshot` for robots that ``stepped`` and were ``reset``.
 
-    ``rows`` (the task state ``rs`` transposed: row k over robots), ``terms`` (``rows`` with the
-    reward terms and metrics, rows ``R_FWD`` on, zero where a robot did not step; ``rows`` itself
-    if all stepped), the simulated ``time`` [s], Newton iterations and rest ``shape`` (those of
-    the last valid state where a stepped robot ``failed``), ``failed``, the energy ledger
-    (N_LEDGER, n), zero where a robot did not step, and whether any robot ``stepped``, all of them
-    were ``stepped`` or ``reset``, any was ``reset``, and how many ``failed``.
+    ``terms`` (``rows`` with the reward terms and metrics, rows ``R_FWD`` on, zero where a robot
+    did not step; ``rows`` itself if all stepped), the ledger zero where a robot did not step,
+    and whether any robot ``stepped``, all of them were ``stepped`` or ``reset``, any was
+    ``reset``, and how many ``failed``.
     """
-    n, k = rs.shape
-    m = shape.shape[1]
-    time_s = np.empty(n)
-    niter = np.empty(n, dtype=np.int64)
-    shape_out = np.empty_like(shape)
-    failed = np.zeros(n, dtype=np.bool_)
+    k, n = rows.shape
     all_stepped = all_present = True
     any_stepped = any_reset = False
     n_failed = 0
@@ -185,32 +273,18 @@ def _info_rows(rs, out, shape, prev, prev_shape, status, stepped, reset, h):
         any_stepped |= stepped[i]
         all_present &= stepped[i] or reset[i]
         any_reset |= reset[i]
-        failed[i] = stepped[i] and status[i] != OK
         n_failed += failed[i]
-        if failed[i]:
-            steps, it, src = prev[i, 0], prev[i, 1], prev_shape
-        else:
-            steps, it, src = out[i, O_NSTEPS], out[i, O_NITER], shape
-        time_s[i] = steps * h[i]
-        niter[i] = int(it)
-        for j in range(m):
-            shape_out[i, j] = src[i, j]
-    rows = np.empty((k, n))
-    for r in range(k):  # row by row: the writes run along a row (2 KB apart robot by robot)
-        for i in range(n):
-            rows[r, i] = rs[i, r]
-    terms = rows
+    terms, step_ledger = rows, ledger
     if not all_stepped:  # written in one pass, not copied and then zeroed robot by robot
         terms = np.empty((k, n))
         for r in range(k):
             for i in range(n):
                 terms[r, i] = rows[r, i] if r < T.R_FWD or stepped[i] else 0.0
-    ledger = np.empty((N_LEDGER, n))
-    for r in range(N_LEDGER):
-        for i in range(n):
-            ledger[r, i] = out[i, O_LEDGER + r] if stepped[i] else 0.0
-    flags = (any_stepped, all_present, any_reset, n_failed)
-    return rows, terms, time_s, niter, shape_out, failed, ledger, flags
+        step_ledger = np.empty_like(ledger)
+        for r in range(N_LEDGER):
+            for i in range(n):
+                step_ledger[r, i] = ledger[r, i] if stepped[i] else 0.0
+    return terms, step_ledger, (any_stepped, all_present, any_reset, n_failed)
 
 
 @dataclass(frozen=True)
@@ -376,6 +450,25 @@ class SoftVectorEnv(VectorEnv):
         self._elapsed = np.zeros(n, dtype=np.int64)
         self._returns = np.zeros(n)
         self._starts = np.zeros(n)
+        self._none = np.zeros(n, dtype=np.bool_)
+        # the leading columns of the unclipped observation that the info's body entries read
+        probe = np.arange(n_obs, dtype=np.float64)[None, :]
+        views = proto._shape_views(probe, self._shape[:1])
+        self._n_raw = max((int(v.max()) + 1 for v in views.values() if np.shares_memory(v, probe)), default=0)
+        self._snap: Snapshot | None = None  # the last step's, or the last reset's
+        book = (self._prev, self._prev_shape, self._elapsed, self._returns, proto.terminate_on_success,
+                max_episode_steps or 0)  # fmt: skip
+        self._step_args = (
+            tuple(self.batch.sim),
+            tuple(self.batch.task),
+            self._status,
+            self._shape,
+            book,
+            self._n_raw,
+        )
+        self._rewards = np.zeros(n)  # the last step's rewards (0 for a robot not stepped)
+        self._dones = np.zeros(n, dtype=np.bool_)
+        self._any_done = False  # whether any episode ended in the last step
         self._needs_reset = True
         self.kernel_seconds = 0.0
         """Wall-clock seconds spent in the compiled batched step so far (for profiling)."""
@@ -394,34 +487,43 @@ class SoftVectorEnv(VectorEnv):
                 )
         infos = self.reset_robots(seeds, [options] * self.num_envs)
         randomized = [info["randomized"] for info in infos]
-        return self.obs.copy(), self.infos(np.zeros(self.num_envs, dtype=np.bool_), self._all, randomized)
+        return self._snap.obs, self.infos(self._none, self._all, randomized)
 
     def step(self, actions):
         """Step every robot (in ``NEXT_STEP`` mode, reset those whose episode ended last step)."""
         if self._needs_reset:
             raise RuntimeError(f"{self.env_id} vector env: call reset() before step()")
         n = self.num_envs
-        none = np.zeros(n, dtype=np.bool_)
+        none = self._none
         same_step = self.autoreset_mode is AutoresetMode.SAME_STEP
         resetting = none if same_step else self._autoreset
         stepping = ~resetting
-        terminated, truncated = self.advance(actions, stepping)
-        rewards, dones, any_done = _step_outputs(stepping, self.rewards, terminated, truncated)
+        actions = self._checked_actions(actions, stepping)
+        # the robots whose episode ended last step (if any did) start again before the others
+        # step, so that the step's snapshot holds their infos and observations too
+        randomized = [self.reset_robot(i) for i in np.flatnonzero(resetting)] if self._any_done else []
+        terminated, truncated = self._run(actions, stepping)
+        rewards, dones, any_done = self._rewards, self._dones, self._any_done
         stats = self.episode_stats(dones) if any_done else None
         infos: dict[str, Any] = {}
         if same_step and any_done:
+            kept = Snapshot(*(a.copy() for a in self._snap))  # the resets' snapshots go into it
             final_obs = np.full(n, None, dtype=object)
             for i in np.flatnonzero(dones):
-                final_obs[i] = self.obs[i].copy()
+                final_obs[i] = kept.obs[i].copy()
             infos["final_obs"], infos["_final_obs"] = final_obs, dones.copy()
             infos["final_info"], infos["_final_info"] = self.infos(dones, none, []), dones.copy()
+            self._snap = kept
             resetting, stepping = dones, ~dones
-        randomized = [self.reset_robot(i) for i in np.flatnonzero(resetting)]
+            resets = np.flatnonzero(resetting)
+            randomized = [self.reset_robot(i) for i in resets]
+            for i in resets:  # the reset robots' infos and observations: after their reset
+                self._take_snapshot(i, i + 1)
         infos.update(self.infos(stepping, resetting, randomized))
         if stats is not None:
             infos["episode"], infos["_episode"] = stats, dones.copy()
         self._autoreset = none if same_step else dones
-        return self.obs.copy(), rewards, terminated, truncated, infos
+        return self._snap.obs, rewards, terminated, truncated, infos
 
     def close_extras(self, **kwargs: Any) -> None:
         """Close every robot's env object."""
@@ -456,7 +558,10 @@ class SoftVectorEnv(VectorEnv):
         Returns:
             (terminated, truncated), (n,) bool each, False for robots not stepped.
         """
-        act = self.batch.task.act
+        return self._run(self._checked_actions(actions, stepping), stepping)
+
+    def _checked_actions(self, actions, stepping: np.ndarray) -> np.ndarray:
+        """``actions`` as :meth:`_run` takes them; a ``ValueError`` that names the fault if they are not a step's."""
         if not (
             type(actions) is np.ndarray and actions.shape == self._act_shape and actions.dtype in _FLOATS
         ):
@@ -471,45 +576,49 @@ class SoftVectorEnv(VectorEnv):
                     f"{self.env_id} vector env actions have shape {actions.shape}; expected "
                     f"{self._act_shape} (one row of values in [-1, 1] per robot)"
                 )
-        bad = _start_step(
-            actions,
-            act,
-            stepping,
-            self.batch.sim.out,
-            self._shape,
-            self._prev,
-            self._prev_shape,
-            self._status,
-        )
-        if bad >= 0:
-            bad = np.flatnonzero(stepping & ~np.isfinite(act).all(axis=1)).tolist()
+        if _bad_action(actions, stepping) >= 0:
+            bad = np.flatnonzero(stepping & ~np.isfinite(actions).all(axis=1)).tolist()
             raise ValueError(
                 f"{self.env_id} vector env actions have non-finite entries for robots {bad[:8]}; "
                 "every entry must be a finite number in [-1, 1]"
             )
-        status = self._status
+        return actions
+
+    def _run(self, actions: np.ndarray, stepping: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`advance` with ``actions`` checked: the compiled step, then the failed robots' envs told."""
+        status, args = self._status, self._step_args
         start = time.perf_counter()
         if self.num_threads == 1:
-            T.batch_step_serial(stepping, tuple(self.batch.sim), tuple(self.batch.task), status)
+            snap, ends, self._rewards, self._any_done = _step_serial(actions, stepping, *args)
         else:
             numba.set_num_threads(self.num_threads)
-            T.batch_step(stepping, tuple(self.batch.sim), tuple(self.batch.task), status, self.num_threads)
+            snap, ends, self._rewards, self._any_done = _step(actions, stepping, *args, self.num_threads)
         self.kernel_seconds += time.perf_counter() - start
-        rs = self.batch.task.rs
-        terminated, truncated, failed = _finish_step(
-            status,
-            stepping,
-            rs[:, T.R_REWARD],
-            rs[:, T.R_SUCCESS],
-            self._proto.terminate_on_success,
-            self._elapsed,
-            self._returns,
-            self.max_episode_steps or 0,
-        )
-        if failed:
-            for i in np.flatnonzero(status != OK):
+        self._snap = Snapshot(*snap)
+        if self._any_done:  # a failed step (status not OK, 0) ends its episode
+            for i in np.flatnonzero(status):
                 self.envs[i].fail(STATUS_REASONS[status[i]])
+        terminated, truncated, self._dones = ends
         return terminated, truncated
+
+    def _take_snapshot(self, lo: int, hi: int) -> None:
+        """Robots ``lo`` .. ``hi - 1``, not stepped, into the current :class:`Snapshot` (after their reset, outside a step)."""
+        sim, task = self.batch.sim, self.batch.task
+        _snapshot(
+            task.rs,
+            sim.out,
+            self._shape,
+            self._prev,
+            self._prev_shape,
+            self._status,
+            self._none,
+            sim.prm[:, P_H],
+            task.obs,
+            task.raw,
+            lo,
+            hi,
+            tuple(self._snap),
+        )
 
     def reset_robot(self, i: int, seed: int | None = None, options: dict[str, Any] | None = None) -> dict:
         """Start robot ``i``'s episode through its env object and its episode counters.
@@ -532,7 +641,10 @@ class SoftVectorEnv(VectorEnv):
         """
         for i in range(self.num_envs):
             self.reset_robot(i, seeds[i], options[i])
+        self._snap = Snapshot(*_new_snapshot(tuple(self.batch.task), self._shape, self._n_raw)[0])
+        self._take_snapshot(0, self.num_envs)
         self._autoreset[:] = False
+        self._any_done = False
         self._needs_reset = False
         return [env.reset_info() for env in self.envs]
 
@@ -556,23 +668,15 @@ class SoftVectorEnv(VectorEnv):
         methods).
         """
         n = self.num_envs
-        rows, terms, time_s, niter, shape, failed, ledger, flags = _info_rows(
-            self.batch.task.rs,
-            self.batch.sim.out,
-            self._shape,
-            self._prev,
-            self._prev_shape,
-            self._status,
-            stepped,
-            reset,
-            self.batch.sim.prm[:, P_H],
-        )  # a robot whose step failed reports its last valid state, as the single env does
+        snap = self._snap
+        rows, time_s, niter, failed = snap.rows, snap.time, snap.niter, snap.failed
+        terms, ledger, flags = _info_rows(rows, failed, snap.ledger, stepped, reset)
         any_stepped, all_present, any_reset, n_failed = flags
         if not (any_stepped or any_reset):
             return {}
         # one mask array per group of keys (read-only by convention)
         mask = self._all.copy() if all_present else stepped | reset
-        shape = self._proto._shape_info(self.batch.task.raw, shape)
+        shape = self._proto._shape_info(snap.raw, snap.shape)
         if not all_present:
             hidden = ~mask
             rows[:, hidden] = 0

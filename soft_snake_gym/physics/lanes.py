@@ -1,6 +1,6 @@
 """Sixteen robots per instruction: implicit stages in water for a block at once; worms' steps, a lane each.
 
-The batched env (``envs.task.batch_step``) steps its swimmers in blocks of :data:`LANES`. In a
+The batched env (``envs.task.step_units``) steps its swimmers in blocks of :data:`LANES`. In a
 block every robot runs the same arithmetic on its own numbers, so each SDIRK2 stage (or BDF2's
 one stage a step) is done for the whole block with each robot in one lane of the CPU's vector
 registers: the stage's start (:func:`stage_start`, :func:`bdf2_start`), its Newton solve
