@@ -155,6 +155,15 @@ def test_autoreset_next_step_returns_the_last_obs_then_a_reset_robot():
     np.testing.assert_array_equal(obs2[:, 16:24], 0.0)  # rest curvatures back to straight
 
 
+def test_a_time_limit_set_after_construction_is_the_one_that_truncates():
+    venv = SoftVectorEnv("SoftEel-v0", 2)
+    venv.reset(seed=0)
+    venv.max_episode_steps = 2  # a public attribute: the step reads it, not a copy made at construction
+    a = np.zeros((2, 8), np.float32)
+    assert not venv.step(a)[3].any()
+    assert venv.step(a)[3].all()
+
+
 def test_autoreset_same_step_gives_final_obs_and_final_info():
     venv = SoftVectorEnv("SoftEel-v0", 3, max_episode_steps=2, autoreset_mode="SameStep")
     venv.reset(seed=5)

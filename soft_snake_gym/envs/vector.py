@@ -156,7 +156,7 @@ def _snapshot(rs, out, shape, prev, prev_shape, status, stepped, h, obs, raw, lo
 
 
 @njit(cache=True, error_model="numpy")
-def _step_part(actions, stepping, s, t, status, shape, book, ends, rewards, snap, first, end):
+def _step_part(actions, stepping, max_steps, s, t, status, shape, book, ends, rewards, snap, first, end):
     """Units ``first`` .. ``end - 1`` of a batched step (``task.units``), on the thread that owns their robots.
 
     Before the physics (``task.step_units``), each robot's action is copied into ``act``
@@ -164,7 +164,7 @@ def _step_part(actions, stepping, s, t, status, shape, book, ends, rewards, snap
     in ``prev`` and ``prev_shape``, its ``status`` set to ``OK``. After it, each robot's episode
     moves on (``book``'s counters; :func:`_finish`) and its :class:`Snapshot` is taken.
     """
-    prev, prev_shape, elapsed, returns, on_success, max_steps = book
+    prev, prev_shape, elapsed, returns, on_success = book
     sa, ta = SimArrays(*s), TaskArrays(*t)
     act, out = ta.act, sa.out
     n = status.size
@@ -217,7 +217,7 @@ def _new_snapshot(t, shape, n_raw):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _step(actions, stepping, s, t, status, shape, book, n_raw, threads):
+def _step(actions, stepping, max_steps, s, t, status, shape, book, n_raw, threads):
     """A batched step over ``threads`` of numba's threads, each taking one run of units (:func:`_step_part`).
 
     Returns the step's :class:`Snapshot` arrays, its ends (3, n) (terminated, truncated, done),
@@ -228,17 +228,19 @@ def _step(actions, stepping, s, t, status, shape, book, n_raw, threads):
     parts = max(1, min(threads, count))
     for c in prange(parts):
         _step_part(
-            actions, stepping, s, t, status, shape, book, ends, rewards, snap, c * count // parts,
+            actions, stepping, max_steps, s, t, status, shape, book, ends, rewards, snap, c * count // parts,
             (c + 1) * count // parts,
         )  # fmt: skip
     return snap, ends, rewards, ends[2].any()
 
 
 @njit(cache=True, error_model="numpy")
-def _step_serial(actions, stepping, s, t, status, shape, book, n_raw):
+def _step_serial(actions, stepping, max_steps, s, t, status, shape, book, n_raw):
     """:func:`_step` on the calling thread alone (no thread-pool launch: for one thread)."""
     snap, ends, rewards = _new_snapshot(t, shape, n_raw)
-    _step_part(actions, stepping, s, t, status, shape, book, ends, rewards, snap, 0, T.units(status.size))
+    _step_part(
+        actions, stepping, max_steps, s, t, status, shape, book, ends, rewards, snap, 0, T.units(status.size)
+    )
     return snap, ends, rewards, ends[2].any()
 
 
@@ -456,8 +458,7 @@ class SoftVectorEnv(VectorEnv):
         views = proto._shape_views(probe, self._shape[:1])
         self._n_raw = max((int(v.max()) + 1 for v in views.values() if np.shares_memory(v, probe)), default=0)
         self._snap: Snapshot | None = None  # the last step's, or the last reset's
-        book = (self._prev, self._prev_shape, self._elapsed, self._returns, proto.terminate_on_success,
-                max_episode_steps or 0)  # fmt: skip
+        book = (self._prev, self._prev_shape, self._elapsed, self._returns, proto.terminate_on_success)
         self._step_args = (
             tuple(self.batch.sim),
             tuple(self.batch.task),
@@ -587,12 +588,15 @@ class SoftVectorEnv(VectorEnv):
     def _run(self, actions: np.ndarray, stepping: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`advance` with ``actions`` checked: the compiled step, then the failed robots' envs told."""
         status, args = self._status, self._step_args
+        max_steps = self.max_episode_steps or 0  # read each step: the attribute is public
         start = time.perf_counter()
         if self.num_threads == 1:
-            snap, ends, self._rewards, self._any_done = _step_serial(actions, stepping, *args)
+            snap, ends, self._rewards, self._any_done = _step_serial(actions, stepping, max_steps, *args)
         else:
             numba.set_num_threads(self.num_threads)
-            snap, ends, self._rewards, self._any_done = _step(actions, stepping, *args, self.num_threads)
+            snap, ends, self._rewards, self._any_done = _step(
+                actions, stepping, max_steps, *args, self.num_threads
+            )
         self.kernel_seconds += time.perf_counter() - start
         self._snap = Snapshot(*snap)
         if self._any_done:  # a failed step (status not OK, 0) ends its episode
