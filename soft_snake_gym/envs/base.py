@@ -259,16 +259,12 @@ class SoftRobotEnv(gym.Env):
         raise NotImplementedError
 
     def _shape_views(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, np.ndarray]:
-        """The body's entries of ``info``, as views in their order (``info`` holds copies).
+        """The body's entries of ``info``, as views in their order (a single env's ``info`` holds copies).
 
         Of the unclipped observation ``raw`` and the driven rest shape ``shape``; (n_obs,) for one
         robot or (n, n_obs) for a batch. Entries named in ``shape_flags`` are given as bool.
         """
         raise NotImplementedError
-
-    def _shape_info(self, raw: np.ndarray, shape: np.ndarray) -> dict[str, Any]:
-        """The body's entries of ``info``: :meth:`_shape_views`, copied (new arrays)."""
-        return self._copy_shape(tuple(self._shape_views(raw, shape).values()))
 
     # --- info: the one place it is built (the vector env calls these too) -------------------
     def _info_displays(
@@ -277,7 +273,7 @@ class SoftRobotEnv(gym.Env):
         """The entries of ``info`` as the bodies of two dict displays, in their order.
 
         The state entries over ``r`` (the task state ``rs``), ``time``, ``shape`` (the dict of
-        :meth:`_shape_info`) and ``niter`` (or the expressions given for the time and the
+        the body's entries) and ``niter`` (or the expressions given for the time and the
         iterations); the rest over ``r``, ``out`` (the simulator's ``out``) and ``failure``: the
         reward terms, the running metrics (``task.episode_metrics``) and the energy ledger
         (``layout.energy_ledger``), from the same keys and indices. ``r`` and ``out`` are lists
@@ -319,16 +315,25 @@ class SoftRobotEnv(gym.Env):
             return state, ", ".join((terms, failure) + groups)
         return f"{state}, {failure}", ", ".join((terms,) + groups)
 
-    def batch_info(self) -> tuple[Callable[..., dict[str, Any]], Callable[..., dict[str, Any]]]:
+    def batch_info(self) -> tuple[Callable[..., dict[str, Any]], ...]:
         """The builders of a batch's ``info`` (:meth:`_info_displays` with masks), for the vector env.
 
-        ``state(r, time, shape, niter, failure, m)``: the state entries and ``failure`` over
-        robots, masked by ``m``, from the rows ``r = rs.T``, the :meth:`_shape_info` of the batch
-        and arrays of the time, the iterations and the failures; ``rest(r, out, ms)``: the step's
-        entries masked by ``ms``, from the rows of the reward terms ``r`` and of the ledger ``out``.
+        ``shape(raw, shape)``: the body's entries of a batch's snapshot (its unclipped
+        observations and driven rest shapes, arrays new each step), as views of them, the
+        ``shape_flags`` as bool arrays; ``state(r, time, shape, niter, failure, m)``: the state
+        entries and ``failure`` over robots, masked by ``m``, from the rows ``r = rs.T``, those body
+        entries and arrays of the time, the iterations and the failures; ``rest(r, out, ms)``: the
+        step's entries masked by ``ms``, from the rows of the reward terms ``r`` and of the ledger
+        ``out``.
         """
+        views = ", ".join(
+            f"{key!r}: v[{i}].astype(bool)" if key in self.shape_flags else f"{key!r}: v[{i}]"
+            for i, key in enumerate(self._shape_keys)
+        )
+        body = _compile_display("v", views)
         state, rest = self._info_displays(masks=("m", "ms"))
         return (
+            lambda raw, shape: body(tuple(self._shape_views(raw, shape).values())),
             _compile_display("r, time, shape, niter, failure, m", state),
             _compile_display("r, out, ms", rest),
         )

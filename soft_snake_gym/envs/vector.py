@@ -439,7 +439,7 @@ class SoftVectorEnv(VectorEnv):
         self.metric_keys = proto.metric_keys
         """Names of the running episode metrics in ``info["metrics"]``."""
         self._proto = proto  # builds the infos, as each robot's env does
-        self._state_of, self._rest_of = proto.batch_info()
+        self._shape_of, self._state_of, self._rest_of = proto.batch_info()
         self._act_shape = (n, n_act)
         self._shape = getattr(self.batch.sim, proto.shape_key)  # the driven rest shape, (n, N-2) or (n, N-1)
         self._status = np.zeros(n, dtype=np.int64)
@@ -680,7 +680,7 @@ class SoftVectorEnv(VectorEnv):
             return {}
         # one mask array per group of keys (read-only by convention)
         mask = self._all.copy() if all_present else stepped | reset
-        shape = self._proto._shape_info(snap.raw, snap.shape)
+        shape = self._shape_of(snap.raw, snap.shape)  # views of the step's new arrays
         if not all_present:
             hidden = ~mask
             rows[:, hidden] = 0
