@@ -707,11 +707,27 @@ def put_state(s, i, x, r, v):
         buf[B_V0, k] = x.v0[_ix(k, r)]
     for k in range(s.kbar.shape[1]):
         s.kbar[i, k] = x.kbar[_ix(k, r)]
-    for k in range(n2 // 2 - 1):
-        buf[B_GEO, 2 * k] = x.E[_ix(4 * k, r)]
-        buf[B_GEO, 2 * k + 1] = x.E[_ix(4 * k + 1, r)]
-        buf[B_GEO + 1, 2 * k] = x.E[_ix(4 * k + 2, r)]
-        buf[B_GEO + 1, 2 * k + 1] = x.E[_ix(4 * k + 3, r)]
+    _edges_of_lane(x.E, buf, r)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _edges_of_lane(E, buf, r):
+    """Lane ``r``'s edges ``E`` into its robot's ``buf[B_GEO]`` (``geometry.edge_geometry``'s layout; the same bits)."""
+    for k in range(buf.shape[1] // 2 - 1):  # the N - 1 edges of 2N coordinates
+        buf[B_GEO, 2 * k] = E[_ix(4 * k, r)]
+        buf[B_GEO, 2 * k + 1] = E[_ix(4 * k + 1, r)]
+        buf[B_GEO + 1, 2 * k] = E[_ix(4 * k + 2, r)]
+        buf[B_GEO + 1, 2 * k + 1] = E[_ix(4 * k + 3, r)]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _edges_into_lane(buf, E, r):
+    """:func:`_edges_of_lane`'s inverse: a robot's ``buf[B_GEO]`` into lane ``r`` of ``E``."""
+    for k in range(buf.shape[1] // 2 - 1):  # the N - 1 edges of 2N coordinates
+        E[_ix(4 * k, r)] = buf[B_GEO, 2 * k]
+        E[_ix(4 * k + 1, r)] = buf[B_GEO, 2 * k + 1]
+        E[_ix(4 * k + 2, r)] = buf[B_GEO + 1, 2 * k]
+        E[_ix(4 * k + 3, r)] = buf[B_GEO + 1, 2 * k + 1]
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -755,7 +771,8 @@ def stage_start(x, p, stage, dt):
     The lanes are swimmers (``envs.task.block_eligible``): their inputs are curvature rates, their
     length rates zero, so ``_move_rest_shape`` moves ``kbar`` alone (``lbar`` gains ``+0``) and
     cannot fail. Stage 0 is ``_be_start``'s in water (the velocity extrapolated by ``GAMMA``, the
-    water's momentum at the start); stage 1 is ``_sdirk2_second_start``'s.
+    water's momentum at the start); stage 1 is ``_sdirk2_second_start``'s, from the edges of ``q``
+    that :func:`newton`'s last residual left in ``E``.
     """
     q, v, q0, v0, p0, A, E, vstep = x.q, x.v, x.q0, x.v0, x.p0, x.A, x.E, x.vstep
     n2 = q.size // LANES
@@ -767,8 +784,7 @@ def stage_start(x, p, stage, dt):
         return
     c = (1.0 - stepper.GAMMA) / stepper.GAMMA
     A[:] = 0.0
-    _edge_geometry(q, E, n2)
-    _momentum(E, v, p, A, n2)
+    _momentum(E, v, p, A, n2)  # E: the edges of q, the first stage's last residual's
     for k in range(q.size):
         p0[k] += c * (A[k] - p0[k])
         vstep[k] = v0[k]
@@ -845,17 +861,16 @@ def stage_end(x, p, stage):
 
     Also the end of a BDF2 step (``stage`` 1), whose energies take the same powers
     (``stepper.implicit_energies``). The step's start velocity back in ``v0`` after stage 1,
-    the edge geometry of ``q`` into ``E``, ``forces.actuator_power`` into ``power[0]`` and
-    ``forces.damping_power`` into ``power[1]``, in their order of operations; on the way, the
-    curvatures and their rates into ``x.curv``. The damping terms are summed for every lane, a
-    zero added in place of a term where ``damping_power`` skips it.
+    ``forces.actuator_power`` into ``power[0]`` and ``forces.damping_power`` into ``power[1]``,
+    in their order of operations, from the edges of ``q`` that :func:`newton`'s last residual
+    left in ``E``; on the way, the curvatures and their rates into ``x.curv``. The damping terms
+    are summed for every lane, a zero added in place of a term where ``damping_power`` skips it.
     """
     q, v, E, power = x.q, x.v, x.E, x.power
     n2 = q.size // LANES
     N = n2 // 2
     if stage == 1:
         layout.copy_into(x.v0, x.vstep)
-    _edge_geometry(q, E, n2)
     _actuator_power(x, p)
     for r in range(LANES):
         power[1, r] = 0.0
@@ -984,7 +999,8 @@ def newton(s, first, go, x, p, dt, result):
     Lane r of block ``x`` is robot ``first + r`` of the stacked ``SimArrays`` ``s``, its stage
     set up by :func:`stage_start`. The block solves the common path (module docstring). A lane
     off it is put back into its robot as the stage started (:func:`put`), solved there by
-    ``_be_newton``, and its results taken back. Writes each lane's ``_be_newton`` result
+    ``_be_newton``, and its results taken back (:func:`_load`). Every lane ends with the edges
+    of its ``q`` in ``E``, its last residual's. Writes each lane's ``_be_newton`` result
     (status, iterations, residual, fluid power, friction power) into ``result`` (5, LANES) and
     its Newton counts into its robot's ``out``. Returns how many lanes the block solved.
     """
@@ -1051,6 +1067,7 @@ def newton(s, first, go, x, p, dt, result):
             put(s, i, x, r, x.guess)
             status, it, rmax, pf, pfr = stepper._be_newton(si, dt, MEDIUM_WATER)
             _load(si, x, r)  # what _be_newton changed: its last residual's, and the velocity
+            _edges_into_lane(si.buf, x.E, r)
             for k in range(n2):
                 x.v[_ix(k, r)] = si.v[k]
         else:
@@ -1480,6 +1497,6 @@ def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
             wi[W_STATUS, r] = status
             wi[W_STEP, r] += 1
             if status != OK:
-                stepper.ledger_energies(si)
+                stepper.ledger_energies(si, True)
                 return _ENDED, _STEP, False
             wi[W_PHASE, r] = _STEP

@@ -362,8 +362,8 @@ def _be_substep(s, dt, medium, extrapolate):
 def _be_start(s, medium, extrapolate):
     """Record the start of an implicit step in ``buf`` and make the first guess (contacts, velocity).
 
-    On the ground ``buf[B_GEO]`` must hold the edge geometry of ``q``, as :func:`move_rest_shape`
-    leaves it (backward Euler is the only method there).
+    On the ground ``buf[B_GEO]`` must hold the edge geometry of ``q``, as at every sub-step's start
+    (:func:`move_rest_shape`; backward Euler is the only method there).
     """
     q, v, prm, buf, J, ibuf = s.q, s.v, s.prm, s.buf, s.J, s.ibuf
     n = q.size
@@ -386,7 +386,7 @@ def _be_start(s, medium, extrapolate):
             F, m, fext = buf[B_F], buf[B_M], buf[B_FEXT]
             for i in range(n):
                 F[i] = fext[i]
-            geo = buf[B_GEO : B_GEO + 2]  # of this q: move_rest_shape made it, as every caller on the ground
+            geo = buf[B_GEO : B_GEO + 2]  # of this q (move_rest_shape's precondition)
             assemble_at(q, v, s.kbar, s.lbar, prm, F, J, 0.0, 0.0, False, False, geo)
             for i in range(n // 2):
                 r0, r1 = 2 * i, 2 * i + 1
@@ -423,9 +423,8 @@ def _sdirk2_second_start(s, medium):
     q0, v0, vstep = buf[B_Q0], buf[B_V0], buf[B_VSTEP]
     c = (1.0 - GAMMA) / GAMMA
     if medium == MEDIUM_WATER and int(prm[P_ADDED_MASS]) == ADDED_MASS_CONSISTENT:
-        p0, p1, geo = buf[B_P0], buf[B_A], buf[B_GEO : B_GEO + 2]
+        p0, p1, geo = buf[B_P0], buf[B_A], buf[B_GEO : B_GEO + 2]  # geo: the first stage's, of q
         p1[:] = 0.0
-        edge_geometry(q, geo)
         fluid_momentum(geo, v, prm, p1, 1.0, 0.0, J, 0.0, False)
         for i in range(n):
             p0[i] += c * (p1[i] - p0[i])
@@ -584,7 +583,7 @@ def ledger_energies(s, geo_made=False):
     start recorded at ``O_L0_*`` into ``out[O_LEDGER:]`` (``LEDGER_KEYS``); ``s`` is
     :class:`~soft_snake_gym.physics.layout.SimArrays` or the plain tuple of its arrays. Leaves
     the edge geometry of ``q`` in ``buf[B_GEO]``, where the observation reads it; ``geo_made``:
-    it is there already (the end of an implicit step leaves it), so it is not made again.
+    it is there already (every step leaves it), so it is not made again.
     """
     s = borrowed_arrays(s)  # no reference counting inside (layout.borrowed)
     q, v, kbar, lbar, prm, buf, out = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf, s.out
@@ -739,13 +738,13 @@ def sdirk2_stage_end(s, stage, dt, u_k, damped, newton, acc):
 
     ``acc`` = (iterations, residual, fluid, damping and friction energy, actuator work) so far;
     returns (status, the new ``acc``), the stage's powers weighted by its quadrature weight
-    (:func:`sdirk2_stage_sums`). After stage 1 the step's start velocity goes back into ``v0``.
+    (:func:`sdirk2_stage_sums`), from the edges of ``q`` that its last residual left in
+    ``buf[B_GEO]``. After stage 1 the step's start velocity goes back into ``v0``.
     """
     q, v, kbar, prm, buf = s.q, s.v, s.kbar, s.prm, s.buf
     lrate, geo = buf[B_LRATE, : s.lbar.size], buf[B_GEO : B_GEO + 2]
     if stage == 1:
         copy_into(buf[B_V0], buf[B_VSTEP])  # the step's start, for the next step's first guess
-    edge_geometry(q, geo)
     p_act = actuator_power(q, kbar, s.lbar, u_k, lrate, prm, geo)
     p_damp = damping_power(q, v, prm, geo) if damped else 0.0
     return sdirk2_stage_sums(stage, dt, damped, newton, p_act, p_damp, acc)
@@ -811,14 +810,14 @@ def move_rest_shape(s, u_k, u_l, dt):
     """The start of an integrator's sub-step of ``dt``: the actuator power, then the rest shape moved.
 
     Returns (status, the actuator power at the start): ``BAD_REST_LENGTH`` if a rest length
-    ends <= 0. Leaves the edge geometry of ``q`` in ``buf[B_GEO]``. The inputs' work over the
-    sub-step is the trapezoidal rule on ``P_act`` (with :func:`implicit_energies`' power at the
-    end): exact for a body that lags the rest shape and for one that follows it at once, where a
-    one-point rule charges inputs that reverse every step with work never done.
+    ends <= 0. ``buf[B_GEO]`` holds the edge geometry of ``q``, as every sub-step, residual and
+    state written from outside leaves it. The inputs' work over the sub-step is the trapezoidal
+    rule on ``P_act`` (with :func:`implicit_energies`' power at the end): exact for a body that
+    lags the rest shape and for one that follows it at once, where a one-point rule charges
+    inputs that reverse every step with work never done.
     """
     q, kbar, lbar, prm, buf = s.q, s.kbar, s.lbar, s.prm, s.buf
     lrate, geo = buf[B_LRATE, : lbar.size], buf[B_GEO : B_GEO + 2]
-    edge_geometry(q, geo)
     p_act0 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
     return _move_rest_shape(kbar, lbar, lrate, u_k, u_l, dt, prm[P_LAG]), p_act0
 
@@ -828,7 +827,9 @@ def implicit_energies(s, u_k, dt, p_act0, p_fluid, p_fric):
     """The end of an implicit sub-step of ``dt``: (fluid, damping, friction energy, actuator work) [J].
 
     The powers where the step evaluates its forces, at its end; the actuator's work by the
-    trapezoidal rule from ``p_act0`` (:func:`move_rest_shape`).
+    trapezoidal rule from ``p_act0`` (:func:`move_rest_shape`). Leaves the edge geometry of ``q``
+    in ``buf[B_GEO]`` (made again: ``lanes.crawl`` has it in a lane, where copying it out cost
+    more than making it).
     """
     q, v, kbar, lbar, prm, buf = s.q, s.v, s.kbar, s.lbar, s.prm, s.buf
     lrate, geo = buf[B_LRATE, : lbar.size], buf[B_GEO : B_GEO + 2]
@@ -903,6 +904,7 @@ def simulate(s, u_k, u_l, n_steps):
                     p_act1 = actuator_power(q, kbar, lbar, u_k, lrate, prm, geo)
                     p_damp = damping_power(q, v, prm, geo) if damped else 0.0
                     p_fluid, p_fric = _symplectic_substep(s, dt, medium)
+                    edge_geometry(q, geo)  # of the new q: the next sub-step's start reads it
                     ef, ed, efr, ea = dt * p_fluid, dt * p_damp, dt * p_fric, 0.5 * dt * (p_act0 + p_act1)
                 else:
                     status, it, res, p_fluid, p_fric = (
@@ -920,8 +922,9 @@ def simulate(s, u_k, u_l, n_steps):
         status = end_step(s, status, niter, resid, e_fluid, e_damp, e_fric, e_act)
         if status != OK:
             break
-    # a step that ended well ended in its powers, at q: implicit_energies or sdirk2_stage_end
-    ledger_energies(s, n_steps > 0 and status == OK and not symplectic)
+    # every sub-step, done or failed, leaves the edges of q in geo (its last residual's, or
+    # the symplectic sub-step's own), and so does every state written from outside
+    ledger_energies(s, True)
     return status
 
 
