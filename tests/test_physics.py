@@ -401,6 +401,27 @@ def test_every_step_leaves_the_edge_geometry_of_its_positions(medium, method, su
         assert np.array_equal(sim.arrays.buf[layout.B_GEO : layout.B_GEO + 2, :-2], geo[:, :-2])
 
 
+@pytest.mark.parametrize(
+    "medium, method, k", [("ground", "backward_euler", 3), ("water", "symplectic_euler", 20)]
+)
+def test_a_step_of_k_sub_steps_is_k_steps_of_a_kth_of_its_length(medium, method, k):
+    # a sub-step's start reads the edges that the sub-step before it left in buf[B_GEO], as a
+    # step reads the last step's: the state is the same bits either way, and the actuator's work
+    # (each start's power in the trapezoidal rule) is the same sum up to its order
+    whole = bent_simulator(10, medium=medium, method=method, h=0.01, substeps=k)
+    parts = bent_simulator(10, medium=medium, method=method, h=0.01 / k, substeps=1)
+    u_k, u_l = np.linspace(-1, 1, 8), np.linspace(-0.2, 0.2, 9)
+    for _ in range(4):
+        assert whole.step(u_k=u_k, u_l=u_l), whole.failure
+        for _ in range(k):
+            assert parts.step(u_k=u_k, u_l=u_l), parts.failure
+        for name in ("q", "v", "kbar", "lbar"):
+            assert np.array_equal(getattr(whole.arrays, name), getattr(parts.arrays, name)), name
+        work = whole.energy_ledger()["actuator_work"]
+        assert work != 0.0
+        assert work == pytest.approx(parts.energy_ledger()["actuator_work"], rel=1e-12, abs=0.0)
+
+
 @njit
 def _turning(q, j):
     return geometry.turning(q, j)
