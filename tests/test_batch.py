@@ -1,6 +1,7 @@
 """The one batched loop steps every robot exactly as a lone simulator would.
 
-The loop is ``task.batch_step`` under the vector env, tested over the public :class:`RobotBatch`.
+The loop is ``task.step_units`` on each of the vector env's threads (``vector._step``), tested over
+the public :class:`RobotBatch`.
 """
 
 from __future__ import annotations
