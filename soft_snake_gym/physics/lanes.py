@@ -865,6 +865,8 @@ def stage_end(x, p, stage):
     in their order of operations, from the edges of ``q`` that :func:`newton`'s last residual
     left in ``E``; on the way, the curvatures and their rates into ``x.curv``. The damping terms
     are summed for every lane, a zero added in place of a term where ``damping_power`` skips it.
+    Where no lane has stretch damping (the default) the stretching's terms are not made at all:
+    their zeros would leave the sum +0, as ``damping_power``'s skip does.
     """
     q, v, E, power = x.q, x.v, x.E, x.power
     n2 = q.size // LANES
@@ -872,9 +874,11 @@ def stage_end(x, p, stage):
     if stage == 1:
         layout.copy_into(x.v0, x.vstep)
     _actuator_power(x, p)
+    stretch_damped = False
     for r in range(LANES):
         power[1, r] = 0.0
-    for k in range(N - 1):
+        stretch_damped |= p[L_D, r] > 0.0
+    for k in range(N - 1 if stretch_damped else 0):
         for r in range(LANES):
             ex = q[_ix(2 * k + 2, r)] - q[_ix(2 * k, r)]
             ey = q[_ix(2 * k + 3, r)] - q[_ix(2 * k + 1, r)]
@@ -1134,12 +1138,13 @@ def ground_residual(x, p, dt, res):
 
 # a worker lane's state, rows of (N_WORK_INT, LANES) int64 and (N_WORK, LANES) float64 arrays:
 # the robot in the lane (-1: none) and its place in the list, the job's phase, steps done and
-# to do, sub-steps done, _be_newton's counters, line-search trials, the status; Newton's
-# |R|^2, max |R|/m and friction power at the iterate, the line search's step, the actuator
-# power at the sub-step's start, simulate's sums over the sub-steps
+# to do, sub-steps done, _be_newton's counters, line-search trials, the status, whether the
+# robot's contacts changed since the lane last took its stuck nodes; Newton's |R|^2, max |R|/m
+# and friction power at the iterate, the line search's step, the actuator power at the
+# sub-step's start, simulate's sums over the sub-steps
 W_ROBOT, W_SLOT, W_PHASE, W_STEP, W_NSTEPS, W_SUB, W_IT, W_PASS, W_SEARCHED, W_TRIALS, W_RENEW = range(11)
-W_STATUS, W_NITER = 11, 12
-N_WORK_INT = 13
+W_STATUS, W_NITER, W_CONTACTS = 11, 12, 13
+N_WORK_INT = 14
 W_NORM2, W_RMAX, W_PFRIC, W_LS, W_PACT0, W_RESID, W_EDAMP, W_EFRIC, W_EACT = range(9)
 N_WORK = 9
 # the phases of a job: a step begins, a sub-step begins, Newton's loop (its top), a residual
@@ -1316,14 +1321,19 @@ def _next_job(s, uk, ul, robots, nsteps, status, taken, wi, r):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _await(si, x, wi, r, phase, jac):
-    """Lane ``r`` waits for the residual at its robot's iterate (``jac``: counted as one with its Jacobian)."""
+    """Lane ``r`` waits for the residual at its robot's iterate (``jac``: counted as one with its Jacobian).
+
+    The lane takes the robot's velocity, and its stuck nodes where they changed (``W_CONTACTS``).
+    """
     si.out[O_NJAC if jac else O_NRES] += 1.0
     wi[W_PHASE, r] = phase
-    state = si.ibuf[I_FRICTION]
     for k in range(si.v.size):
         x.v[_ix(k, r)] = si.v[k]
-    for k in range(state.size // 2):
-        x.stuck[_ix(k, r)] = 1.0 if state[k] == STUCK else 0.0
+    if wi[W_CONTACTS, r]:
+        state = si.ibuf[I_FRICTION]
+        for k in range(state.size // 2):
+            x.stuck[_ix(k, r)] = 1.0 if state[k] == STUCK else 0.0
+        wi[W_CONTACTS, r] = False
     return _RESIDUAL
 
 
@@ -1416,7 +1426,7 @@ def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
             wi[W_SEARCHED, r] = wi[W_PASS, r]
         wf[W_NORM2, r], wf[W_RMAX, r], wf[W_PFRIC, r] = norm2, rmax, x.res[L_PFRIC, r]
         if rmax > tol and stepper._stick_slow_nodes(v, ibuf, prm, n):
-            wi[W_PASS, r] = 0
+            wi[W_PASS, r], wi[W_CONTACTS, r] = 0, True
             return _RESIDUAL, _POINT, True
         if (
             rmax > tol
@@ -1428,7 +1438,7 @@ def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
         wi[W_PHASE, r] = _TOP
     elif phase == _SOLVE:
         if stepper._reversal_in_update(v, dv, buf[B_VSLIDE], ibuf, n):
-            wi[W_PASS, r] = 0
+            wi[W_PASS, r], wi[W_CONTACTS, r] = 0, True
             return _RESIDUAL, _POINT, True
         renew = wf[W_RMAX, r] * wf[W_RMAX, r] > tol and wi[W_SEARCHED, r] != wi[W_PASS, r] - 1
         wf[W_LS, r], wi[W_TRIALS, r], wi[W_RENEW, r] = 1.0, 0, renew
@@ -1454,7 +1464,7 @@ def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
                 continue
             stepper._be_start(si, MEDIUM_GROUND, 1.0)
             _start_solve(si, x, p, r)
-            wi[W_IT, r], wi[W_PASS, r], wi[W_SEARCHED, r] = 0, 0, -1
+            wi[W_IT, r], wi[W_PASS, r], wi[W_SEARCHED, r], wi[W_CONTACTS, r] = 0, 0, -1, True
             return _RESIDUAL, _POINT, True
         elif phase == _TOP:
             if wf[W_RMAX, r] <= tol:
@@ -1462,7 +1472,7 @@ def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
                 if not stepper._update_contacts(v, buf, ibuf, prm, dt, n):
                     wi[W_STATUS, r], wi[W_PHASE, r] = OK, _SUB_END
                     continue
-                wi[W_PASS, r] = 0
+                wi[W_PASS, r], wi[W_CONTACTS, r] = 0, True
                 return _RESIDUAL, _POINT, True
             if wi[W_PASS, r] == maxit or not math.isfinite(wf[W_NORM2, r]):
                 wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
