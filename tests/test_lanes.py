@@ -457,11 +457,10 @@ def _ground_block(s, dt):
     x = lanes.allocate(s.q.shape[1])
     p = np.empty((lanes.N_LANE_PRM, LANES))
     wi = np.zeros((lanes.N_WORK_INT, LANES), dtype=np.int64)
-    wi[lanes.W_CONTACTS] = True  # as a sub-step's start leaves it: the lane takes the stuck nodes
     for r in range(LANES):
         si = L.sim_views(s.f[r], s.ibuf[r])
         lanes._start_solve(si, x, p, r)
-        lanes._await(si, x, wi, r, 0, True)
+        lanes._await(si, x, wi, r, lanes._POINT, True)  # as a sub-step's start awaits its first residual
     x.J[:] = np.nan  # as in _taken: the residual writes every entry of the band
     lanes.ground_residual(x, p, dt, x.res)
     return x

@@ -1138,13 +1138,12 @@ def ground_residual(x, p, dt, res):
 
 # a worker lane's state, rows of (N_WORK_INT, LANES) int64 and (N_WORK, LANES) float64 arrays:
 # the robot in the lane (-1: none) and its place in the list, the job's phase, steps done and
-# to do, sub-steps done, _be_newton's counters, line-search trials, the status, whether the
-# robot's contacts changed since the lane last took its stuck nodes; Newton's |R|^2, max |R|/m
-# and friction power at the iterate, the line search's step, the actuator power at the
-# sub-step's start, simulate's sums over the sub-steps
+# to do, sub-steps done, _be_newton's counters, line-search trials, the status; Newton's
+# |R|^2, max |R|/m and friction power at the iterate, the line search's step, the actuator
+# power at the sub-step's start, simulate's sums over the sub-steps
 W_ROBOT, W_SLOT, W_PHASE, W_STEP, W_NSTEPS, W_SUB, W_IT, W_PASS, W_SEARCHED, W_TRIALS, W_RENEW = range(11)
-W_STATUS, W_NITER, W_CONTACTS = 11, 12, 13
-N_WORK_INT = 14
+W_STATUS, W_NITER = 11, 12
+N_WORK_INT = 13
 W_NORM2, W_RMAX, W_PFRIC, W_LS, W_PACT0, W_RESID, W_EDAMP, W_EFRIC, W_EACT = range(9)
 N_WORK = 9
 # the phases of a job: a step begins, a sub-step begins, Newton's loop (its top), a residual
@@ -1323,17 +1322,18 @@ def _next_job(s, uk, ul, robots, nsteps, status, taken, wi, r):
 def _await(si, x, wi, r, phase, jac):
     """Lane ``r`` waits for the residual at its robot's iterate (``jac``: counted as one with its Jacobian).
 
-    The lane takes the robot's velocity, and its stuck nodes where they changed (``W_CONTACTS``).
+    The lane takes the robot's velocity, and at ``_POINT`` its stuck nodes too: a pass of
+    Newton's loop starts there, where the contacts have just changed (a sub-step's start, a
+    contact pass, a reversal held, a slow node stuck), and nowhere else do they change.
     """
     si.out[O_NJAC if jac else O_NRES] += 1.0
     wi[W_PHASE, r] = phase
     for k in range(si.v.size):
         x.v[_ix(k, r)] = si.v[k]
-    if wi[W_CONTACTS, r]:
+    if phase == _POINT:
         state = si.ibuf[I_FRICTION]
         for k in range(state.size // 2):
             x.stuck[_ix(k, r)] = 1.0 if state[k] == STUCK else 0.0
-        wi[W_CONTACTS, r] = False
     return _RESIDUAL
 
 
@@ -1426,7 +1426,7 @@ def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
             wi[W_SEARCHED, r] = wi[W_PASS, r]
         wf[W_NORM2, r], wf[W_RMAX, r], wf[W_PFRIC, r] = norm2, rmax, x.res[L_PFRIC, r]
         if rmax > tol and stepper._stick_slow_nodes(v, ibuf, prm, n):
-            wi[W_PASS, r], wi[W_CONTACTS, r] = 0, True
+            wi[W_PASS, r] = 0
             return _RESIDUAL, _POINT, True
         if (
             rmax > tol
@@ -1438,7 +1438,7 @@ def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
         wi[W_PHASE, r] = _TOP
     elif phase == _SOLVE:
         if stepper._reversal_in_update(v, dv, buf[B_VSLIDE], ibuf, n):
-            wi[W_PASS, r], wi[W_CONTACTS, r] = 0, True
+            wi[W_PASS, r] = 0
             return _RESIDUAL, _POINT, True
         renew = wf[W_RMAX, r] * wf[W_RMAX, r] > tol and wi[W_SEARCHED, r] != wi[W_PASS, r] - 1
         wf[W_LS, r], wi[W_TRIALS, r], wi[W_RENEW, r] = 1.0, 0, renew
@@ -1464,7 +1464,7 @@ def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
                 continue
             stepper._be_start(si, MEDIUM_GROUND, 1.0)
             _start_solve(si, x, p, r)
-            wi[W_IT, r], wi[W_PASS, r], wi[W_SEARCHED, r], wi[W_CONTACTS, r] = 0, 0, -1, True
+            wi[W_IT, r], wi[W_PASS, r], wi[W_SEARCHED, r] = 0, 0, -1
             return _RESIDUAL, _POINT, True
         elif phase == _TOP:
             if wf[W_RMAX, r] <= tol:
@@ -1472,7 +1472,7 @@ def _advance(si, u_k, u_l, x, p, wi, wf, dt, r):
                 if not stepper._update_contacts(v, buf, ibuf, prm, dt, n):
                     wi[W_STATUS, r], wi[W_PHASE, r] = OK, _SUB_END
                     continue
-                wi[W_PASS, r], wi[W_CONTACTS, r] = 0, True
+                wi[W_PASS, r] = 0
                 return _RESIDUAL, _POINT, True
             if wi[W_PASS, r] == maxit or not math.isfinite(wf[W_NORM2, r]):
                 wi[W_STATUS, r], wi[W_PHASE, r] = NOT_CONVERGED, _SUB_END
