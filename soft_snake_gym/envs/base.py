@@ -420,7 +420,7 @@ class SoftRobotEnv(gym.Env):
 
         self._failure = None
         self._needs_reset = False
-        T.robot_reset(tuple(self.sim.arrays), tuple(self.task))  # plain tuples: see physics.layout
+        T.robot_reset(*self._kernel_args)
         self._trail_com.clear()
         self._trail_head.clear()
         self._record_trail()

@@ -90,6 +90,8 @@ SEARCH_WINDOW = 16
 """Segments searched on either side of the last closest one when the robot follows a path."""
 
 # --- task state rs ----------------------------------------------------------------------------
+# Below R_FWD the state that an info reports after a reset too; from R_FWD on what a step makes,
+# which a batched info gives as 0 for a robot that did not step (envs.vector._snapshot).
 (
     R_STATUS,
     R_COMX,
@@ -99,6 +101,8 @@ SEARCH_WINDOW = 16
     R_HEADING,
     R_P_ACT,
     R_P_MED,
+    R_NAV,
+    R_SUCCESS,
     R_FWD,
     R_EPOW,
     R_ASQ,
@@ -109,11 +113,9 @@ SEARCH_WINDOW = 16
     R_RXTE,
     R_RSUCC,
     R_REWARD,
-    R_NAV,
     R_S,
     R_S0,
     R_SEG,
-    R_SUCCESS,
     R_XINT,
 ) = range(24)
 M0 = 24
@@ -396,13 +398,13 @@ def _metrics(out, prm, tp, rs):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def robot_reset(s, t):
-    """After the simulator's reset of ``s`` (:class:`~soft_snake_gym.physics.SimArrays`).
+def robot_reset(sf, ibuf, tf, obs, n_act, n_path):
+    """After the simulator's reset of the robot given by its blocks, as :func:`robot_step_blocks` takes them.
 
-    The episode of ``t`` (:class:`TaskArrays`) starts here (centre of mass, zero powers and rewards,
-    metrics, observation).
+    The episode of its task starts here (centre of mass, zero powers and rewards, metrics,
+    observation).
     """
-    s, t = SimArrays(*s), TaskArrays(*t)
+    s, t = L.sim_views(sf, ibuf), task_views(tf, obs, ibuf.shape[1] // 2, n_act, n_path)
     rs = t.rs
     rs[:] = 0.0
     x, y = _com(s.q, t.w)

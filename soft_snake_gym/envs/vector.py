@@ -130,7 +130,9 @@ def _snapshot(rs, out, shape, prev, prev_shape, status, stepped, h, obs, raw, lo
 
     A robot that ``stepped`` and whose ``status`` is not ``OK`` reports its last valid state,
     as the single env does: the step count and iterations ``prev`` (n, 2) and the rest shape
-    ``prev_shape`` recorded before its step. ``h``: each robot's step [s].
+    ``prev_shape`` recorded before its step. ``h``: each robot's step [s]. A robot that did not
+    step has +0 in the step's rows (``R_FWD`` on: the reward terms and metrics) and in the ledger,
+    as its ``info`` gives them (:func:`_info_rows`).
     """
     rows, time_s, niter, shape_out, failed, ledger, obs_out, raw_out = snap
     for i in range(lo, hi):
@@ -149,10 +151,10 @@ def _snapshot(rs, out, shape, prev, prev_shape, status, stepped, h, obs, raw, lo
             raw_out[i, j] = raw[i, j]
     for r in range(rs.shape[1]):  # row by row: the writes run along a row (2 KB apart robot by robot)
         for i in range(lo, hi):
-            rows[r, i] = rs[i, r]
+            rows[r, i] = rs[i, r] if r < T.R_FWD or stepped[i] else 0.0
     for r in range(N_LEDGER):
         for i in range(lo, hi):
-            ledger[r, i] = out[i, O_LEDGER + r]
+            ledger[r, i] = out[i, O_LEDGER + r] if stepped[i] else 0.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -261,10 +263,12 @@ def _episode_stats(dones, returns, elapsed, starts, now):
 def _info_rows(rows, failed, ledger, stepped, reset):
     """What a batched ``info`` makes of a :class:`Snapshot` for robots that ``stepped`` and were ``reset``.
 
-    ``terms`` (``rows`` with the reward terms and metrics, rows ``R_FWD`` on, zero where a robot
-    did not step; ``rows`` itself if all stepped), the ledger zero where a robot did not step,
-    and whether any robot ``stepped``, all of them were ``stepped`` or ``reset``, any was
-    ``reset``, and how many ``failed``.
+    ``terms`` (``rows`` with the reward terms and metrics, rows ``R_FWD`` on, +0 where a robot
+    did not step), the ledger +0 where a robot did not step, and whether any robot ``stepped``,
+    all of them were ``stepped`` or ``reset``, any was ``reset``, and how many ``failed``.
+    ``terms`` and the ledger are the snapshot's own arrays where they hold +0 there already: as
+    :func:`_snapshot` leaves them for the robots it did not step, all but ``SAME_STEP``'s
+    ``final_info``.
     """
     k, n = rows.shape
     all_stepped = all_present = True
@@ -277,7 +281,7 @@ def _info_rows(rows, failed, ledger, stepped, reset):
         any_reset |= reset[i]
         n_failed += failed[i]
     terms, step_ledger = rows, ledger
-    if not all_stepped:  # written in one pass, not copied and then zeroed robot by robot
+    if not all_stepped and not _zero_where_not(rows, ledger, stepped):  # in one pass, not copied then zeroed
         terms = np.empty((k, n))
         for r in range(k):
             for i in range(n):
@@ -287,6 +291,21 @@ def _info_rows(rows, failed, ledger, stepped, reset):
             for i in range(n):
                 step_ledger[r, i] = ledger[r, i] if stepped[i] else 0.0
     return terms, step_ledger, (any_stepped, all_present, any_reset, n_failed)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _zero_where_not(rows, ledger, stepped):
+    """True if the step's rows (``R_FWD`` on) and the ledger hold +0 (not -0) for every robot not ``stepped``."""
+    for i in range(stepped.size):
+        if stepped[i]:
+            continue
+        for r in range(T.R_FWD, rows.shape[0]):
+            if rows[r, i] != 0.0 or math.copysign(1.0, rows[r, i]) < 0.0:
+                return False
+        for r in range(N_LEDGER):
+            if ledger[r, i] != 0.0 or math.copysign(1.0, ledger[r, i]) < 0.0:
+                return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -502,7 +521,7 @@ class SoftVectorEnv(VectorEnv):
         actions = self._checked_actions(actions, stepping)
         # the robots whose episode ended last step (if any did) start again before the others
         # step, so that the step's snapshot holds their infos and observations too
-        randomized = [self.reset_robot(i) for i in np.flatnonzero(resetting)] if self._any_done else []
+        randomized = [self.reset_robot(i) for i in resetting.nonzero()[0].tolist()] if self._any_done else []
         terminated, truncated = self._run(actions, stepping)
         rewards, dones, any_done = self._rewards, self._dones, self._any_done
         stats = self.episode_stats(dones) if any_done else None
@@ -600,7 +619,7 @@ class SoftVectorEnv(VectorEnv):
         self.kernel_seconds += time.perf_counter() - start
         self._snap = Snapshot(*snap)
         if self._any_done:  # a failed step (status not OK, 0) ends its episode
-            for i in np.flatnonzero(status):
+            for i in status.nonzero()[0].tolist():
                 self.envs[i].fail(STATUS_REASONS[status[i]])
         terminated, truncated, self._dones = ends
         return terminated, truncated
@@ -688,20 +707,21 @@ class SoftVectorEnv(VectorEnv):
                 value[hidden] = 0
         failure = np.empty(n, dtype=object)  # None throughout
         if n_failed:
-            for i in np.flatnonzero(failed):
+            for i in failed.nonzero()[0].tolist():
                 failure[i] = STATUS_REASONS[self._status[i]]
         infos = self._state_of(rows, time_s, shape, niter, failure, mask)
         if any_stepped:
             infos.update(self._rest_of(terms, ledger, stepped.copy()))
         if any_reset:
             drawn: dict[str, Any] = {}
-            for i, draws in zip(np.flatnonzero(reset), randomized, strict=True):
-                for key, value in draws.items():
-                    if key not in drawn:
-                        drawn[key] = np.zeros(n)
-                        drawn[f"_{key}"] = np.zeros(n, dtype=np.bool_)
-                    drawn[key][i] = value
-                    drawn[f"_{key}"][i] = True
+            if any(randomized):  # without randomize, every robot's draws are empty
+                for i, draws in zip(reset.nonzero()[0].tolist(), randomized, strict=True):
+                    for key, value in draws.items():
+                        if key not in drawn:
+                            drawn[key] = np.zeros(n)
+                            drawn[f"_{key}"] = np.zeros(n, dtype=np.bool_)
+                        drawn[key][i] = value
+                        drawn[f"_{key}"][i] = True
             infos["randomized"], infos["_randomized"] = drawn, reset.copy()
         return infos
 

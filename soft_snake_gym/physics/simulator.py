@@ -159,8 +159,12 @@ def _body(kbar, lbar, heading, comx, comy):
 
 
 @njit(cache=True, error_model="numpy")
-def _start_near_rest(s, kbar, lbar, u, scale, length_noise, lbar_min, lbar_max):
-    """:meth:`Simulator.start_near_rest`'s arithmetic: each draw ``-scale + 2 scale u``, as ``rng.uniform`` makes it."""
+def _start_near_rest(f, ibuf, kbar, lbar, u, scale, length_noise, lbar_min, lbar_max):
+    """:meth:`Simulator.start_near_rest`'s arithmetic: each draw ``-scale + 2 scale u``, as ``rng.uniform`` makes it.
+
+    The robot is given by its blocks ``f`` and ``ibuf`` (``SimArrays.f``, ``.ibuf``): two arrays for
+    numba to unbox instead of a tuple of twenty.
+    """
     low, span = -scale, scale - -scale
     nk, nl = kbar.size, lbar.size
     kappa = np.empty(nk)
@@ -174,7 +178,7 @@ def _start_near_rest(s, kbar, lbar, u, scale, length_noise, lbar_min, lbar_max):
     if length_noise:
         for j in range(nl):
             rest[j] = min(max(rest[j], lbar_min), lbar_max)
-    stepper.restart(s, x, np.zeros_like(x), kbar, rest)
+    stepper.restart(L.sim_views(f, ibuf), x, np.zeros_like(x), kbar, rest)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -318,7 +322,8 @@ class Simulator:
         length_noise = lbar_limits is not None
         lo, hi = lbar_limits if length_noise else (0.0, 0.0)
         draws = rng.random(kbar.size + (lbar.size if length_noise else 0) + 1)
-        _start_near_rest(tuple(self.arrays), kbar, lbar, draws, float(scale), length_noise, lo, hi)
+        a = self.arrays
+        _start_near_rest(a.f, a.ibuf, kbar, lbar, draws, float(scale), length_noise, lo, hi)
         self.failure = None
 
     def set_state(self, x=None, v=None, kbar=None, lbar=None, lbar_dot=None) -> None:
