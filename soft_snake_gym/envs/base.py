@@ -391,18 +391,18 @@ class SoftRobotEnv(gym.Env):
         """
         super().reset(seed=seed)
         s = self.settings
-        options = dict(options or {})
-        if "goal_direction" in options:
-            goal = options.pop("goal_direction")
-            check_number("reset options.goal_direction", goal)
-        else:
-            goal = s.goal_direction  # checked with the settings
-        body_keys = ("x", "v", "kbar", "lbar")
-        unknown = sorted(set(options) - set(body_keys))
-        if unknown:
-            raise ValueError(
-                f"reset options {unknown} are unknown; valid options: {', '.join(body_keys)}, goal_direction"
-            )
+        goal = s.goal_direction  # checked with the settings
+        if options:
+            options = dict(options)
+            if "goal_direction" in options:
+                goal = options.pop("goal_direction")
+                check_number("reset options.goal_direction", goal)
+            body_keys = ("x", "v", "kbar", "lbar")
+            unknown = sorted(set(options) - set(body_keys))
+            if unknown:
+                raise ValueError(
+                    f"reset options {unknown} are unknown; valid options: {', '.join(body_keys)}, goal_direction"
+                )
         self._set_goal(float(goal))
         if s.randomize.enabled:
             config, self.randomized = s.randomize.draw(self.np_random, self.base_config)
@@ -421,9 +421,10 @@ class SoftRobotEnv(gym.Env):
         self._failure = None
         self._needs_reset = False
         T.robot_reset(*self._kernel_args)
-        self._trail_com.clear()
-        self._trail_head.clear()
-        self._record_trail()
+        if self.render_mode is not None:  # the trails are for rendering
+            self._trail_com.clear()
+            self._trail_head.clear()
+            self._record_trail()
 
     def step(self, action):
         """Hold ``action`` for one control step of ``dt`` seconds and advance the physics.
@@ -572,9 +573,8 @@ class SoftRobotEnv(gym.Env):
 
     def _set_goal(self, goal: float) -> None:
         self.goal_direction = goal
-        self._goal = np.array([math.cos(goal), math.sin(goal)])
         tp = self.task.tp
-        tp[T.T_GOAL], tp[T.T_GCOS], tp[T.T_GSIN] = goal, self._goal[0], self._goal[1]
+        tp[T.T_GOAL], tp[T.T_GCOS], tp[T.T_GSIN] = goal, math.cos(goal), math.sin(goal)
 
     @property
     def _com(self) -> np.ndarray:
