@@ -142,7 +142,7 @@ by one in scalar code: a round costs the block the same for one busy lane as for
 CHORD_STEPS = 3
 """The most chord steps a stage takes in the block: a lane that would take more is solved alone.
 
-Under random actions (256 eels, 2,880 steps, 2026-12-07) an SDIRK2 stage converges after its Newton
+Under random actions (256 eels, 2,000 steps, 2026-12-07) an SDIRK2 stage converges after its Newton
 step and one chord step (99.4 % of the steps; in the others one stage needs no chord step), and
 BDF2's one stage after three (99.6 %; the others two); none takes more. Each step of the loop costs
 the block a solve and a residual, whoever needs it."""
