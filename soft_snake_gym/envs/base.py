@@ -421,10 +421,9 @@ class SoftRobotEnv(gym.Env):
         self._failure = None
         self._needs_reset = False
         T.robot_reset(*self._kernel_args)
-        if self.render_mode is not None:  # the trails are for rendering
-            self._trail_com.clear()
-            self._trail_head.clear()
-            self._record_trail()
+        self._trail_com.clear()
+        self._trail_head.clear()
+        self._record_trail()
 
     def step(self, action):
         """Hold ``action`` for one control step of ``dt`` seconds and advance the physics.
