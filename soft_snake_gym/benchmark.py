@@ -78,6 +78,9 @@ FLOPS_PER_STEP = {"SoftEel-v0": 27_600, "SoftWorm-v0": 27_500}
 """Floating-point operations of a robot step under random actions, counted from the kernels for
 the default bodies (docs/performance.md, "Floating-point work per robot step"): estimates, not
 measurements; the variants' rows (the gait, BDF2) do other work and are left out."""
+WARMUP_SECONDS = 0.5
+"""Each case steps this long before the rounds, unmeasured: its first steps load numba's code (in
+a fresh clone, compile it), and its first autoresets take paths its construction did not."""
 MATMUL_SIZE = 1000
 """The side of the matrices whose product measures the peak: about 2 GFLOP a product."""
 _PLAIN_ROW = re.compile(r"^(SoftEel-v0|SoftWorm-v0) (gym\.make|batched n=\d+ threads=(\d+))$")
@@ -392,10 +395,13 @@ def run_benchmark(
     """Run every case; returns the results (see :func:`format_report`).
 
     The batched worms run at 256 robots (or, if 256 is not among ``robots``, at the largest count).
+    Each case first steps unmeasured for ``min(seconds, WARMUP_SECONDS)``, then the cases run in
+    ``repeats`` interleaved rounds of ``seconds`` each.
     A ``KeyboardInterrupt`` (Ctrl-C; SIGTERM under ``training.sigterm_as_interrupt``) ends the run
     early and keeps what it measured: in the rounds, the complete ones (every case in the same
     rounds, as the ratios need them), and after them, each row made before it; the results then
-    say where in ``interrupted``. One in the first round, with no round complete, propagates.
+    say where in ``interrupted``. One in the warm-up or the first round, with no round complete,
+    propagates.
     """
     say = progress or (lambda msg: None)
     all_threads = numba.config.NUMBA_NUM_THREADS
@@ -440,6 +446,9 @@ def run_benchmark(
     interrupted = None  # where Ctrl-C or SIGTERM stopped the run: what was measured is kept
     complete = 0
     try:
+        for name, case in cases.items():
+            say(f"warming up: {name}")
+            case.run(min(seconds, WARMUP_SECONDS))
         for r in range(repeats):
             for name, case in cases.items():
                 say(f"round {r + 1}/{repeats}: {name}")
