@@ -140,10 +140,17 @@ def test_a_benchmark_stopped_in_its_first_round_writes_nothing_and_says_why(tmp_
     assert not out.exists()
 
 
-def test_benchmark_without_envpool_says_so_and_skips_its_rows(monkeypatch):
+def test_benchmark_warms_up_every_case_and_without_envpool_skips_its_rows(monkeypatch):
     monkeypatch.setitem(sys.modules, "envpool", None)  # as if not installed: import raises
-    res = run_benchmark(seconds=0.02, repeats=1, robots=(2,), ppo=False, nodes=())
+    said = []
+    res = run_benchmark(seconds=0.02, repeats=1, robots=(2,), ppo=False, nodes=(), progress=said.append)
     assert not any(r["case"].startswith("EnvPool") for r in res["throughput"])
+    # every measured case stepped unmeasured before the first round (numba's code loaded then)
+    first_round = next(k for k, msg in enumerate(said) if msg.startswith("round 1/"))
+    warmed = {
+        msg.removeprefix("warming up: ") for msg in said[:first_round] if msg.startswith("warming up: ")
+    }
+    assert warmed == {r["case"] for r in res["throughput"]}
     assert "pip install 'soft-snake-gym[bench]'" in res["envpool"]
     assert "EnvPool Swimmer-v4 rows skipped" in format_report(res)
 
