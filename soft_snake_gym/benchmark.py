@@ -55,7 +55,6 @@ from soft_snake_gym.envs.registration import importable_id
 from soft_snake_gym.envs.vector import ROBOTS_PER_THREAD
 from soft_snake_gym.gaits import serpenoid, serpenoid_phase
 from soft_snake_gym.training import load_train_config, policy_kwargs, stopped_by, torch_for_learning
-from soft_snake_gym.vector_width import asks_512_bits
 
 __all__ = ["run_benchmark", "format_report", "DEFAULT_ROBOTS", "DEFAULT_NODES", "ENVPOOL_ROBOTS"]
 
@@ -590,16 +589,10 @@ def _processor() -> str:
 
 
 def _code_target() -> dict[str, Any]:
-    """What numba compiles for: LLVM's name for the CPU, and whether 512-bit vectors were asked for.
-
-    ``llvm_cpu`` and ``vectors_512`` (``SOFT_SNAKE_GYM_VECTOR_BITS=512``, or its feature set in
-    ``NUMBA_CPU_FEATURES`` by hand: ``vector_width.asks_512_bits``): the same code runs at different
-    speeds for either, so a result says which it measured.
-    """
+    """What numba compiles for, ``llvm_cpu``: LLVM's name for the CPU, whose tuning sets the code's speed."""
     from numba.core.registry import cpu_target
 
-    _, name, features = cpu_target.target_context.codegen().magic_tuple()
-    return {"llvm_cpu": name, "vectors_512": asks_512_bits(features)}
+    return {"llvm_cpu": cpu_target.target_context.codegen().magic_tuple()[1]}
 
 
 def _threading_layer() -> str:
@@ -712,8 +705,7 @@ def format_report(res: dict[str, Any]) -> str:
         f"{res['machine']['numba_threads']} ({res['machine']['threading_layer']})"
     ]
     if "llvm_cpu" in res["machine"]:  # results written before 2026-12-06 20:20 have no target
-        wide = ", 512-bit vectors asked for" if res["machine"]["vectors_512"] else ""
-        lines[0] += f", code for LLVM's {res['machine']['llvm_cpu']}{wide}"
+        lines[0] += f", code for LLVM's {res['machine']['llvm_cpu']}"
     if "interrupted" in res:
         stop = res["interrupted"]
         lines.append(f"stopped early by {stop['signal']} {stop['where']}")

@@ -77,7 +77,7 @@ def test_benchmark_cli_writes_json_and_png(tmp_path, capsys):
         assert res["machine"]["processor"] == models[0]
         assert models[0] in text.splitlines()[0]
     assert "floating-point work against the machine's peak" in text
-    # what numba compiled for, as its code generator says (and 512 bits: tests/test_vector_width.py)
+    # what numba compiled for, as its code generator says
     from numba.core.registry import cpu_target
 
     llvm_cpu = cpu_target.target_context.codegen().magic_tuple()[1]

@@ -1,75 +1,63 @@
-"""``SOFT_SNAKE_GYM_VECTOR_BITS``: what numba's code generator is given, in a fresh interpreter each."""
+"""The lane kernels' 512-bit vectors: what LLVM makes of them, in a fresh interpreter.
+
+LLVM tunes for Intel's cores with AVX-512 (``icelake-server`` here) as if they preferred 256-bit
+vectors; the lane kernels ask for 512 bits for themselves (``lanes._wide_vectors``), the other
+kernels keep LLVM's choice. Only compiled, never run, so any x86-64 host can check it.
+"""
 
 from __future__ import annotations
 
 import json
 import os
+import platform
 import subprocess
 import sys
 
 import pytest
-from llvmlite import binding
 
-AVX512 = binding.get_host_cpu_features().get("avx512f", False)
-
-# the features numba's JIT compiles with: those of its target machine, made at its first function
+# machine code for an Intel server core, from two small loops and a lane kernel of the package
 PROBE = """
-import os, soft_snake_gym
-from numba.core.registry import cpu_target
-print(cpu_target.target_context.codegen().magic_tuple()[2])
-print(os.environ.get("NUMBA_CPU_FEATURES", "unset"))
-"""
-
-
-# what a benchmark's results record of it
-BENCHMARK_PROBE = """
 import json
-from soft_snake_gym.benchmark import _code_target
-print(json.dumps(_code_target()))
+import numpy as np
+from numba import njit, typeof
+from soft_snake_gym.physics import lanes
+
+@njit
+def wide(a, b):
+    lanes._wide_vectors()
+    for k in range(a.size):
+        b[k] = 2.0 * a[k] + b[k]
+
+@njit
+def plain(a, b):
+    for k in range(a.size):
+        b[k] = 2.0 * a[k] + b[k]
+
+a = np.zeros(64)
+x, p = lanes.allocate(20), np.zeros((lanes.N_LANE_PRM, lanes.LANES))
+energies = njit(error_model="numpy")(lanes.energies.py_func)  # not from the cache: its code is inspected
+asm = {}
+for name, fn, args in (("wide", wide, (a, a)), ("plain", plain, (a, a)), ("energies", energies, (x, p))):
+    sig = tuple(typeof(v) for v in args)
+    fn.compile(sig)
+    asm[name] = fn.inspect_asm(sig)
+print(json.dumps({name: {"zmm": text.count("%zmm"), "ymm": text.count("%ymm")} for name, text in asm.items()}))
 """
 
 
-def _import(probe: str = PROBE, **env: str) -> subprocess.CompletedProcess:
-    """Run ``probe`` in a new interpreter, NUMBA_CPU_* and the variable unset, ``env`` added."""
-    base = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_CPU_", "SOFT_SNAKE_GYM_VECTOR"))}
-    return subprocess.run(
-        [sys.executable, "-c", probe], env=base | env, capture_output=True, text=True, timeout=120
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="an x86-64 CPU name")
+def test_lane_kernels_ask_for_512_bit_vectors_where_llvm_prefers_256():
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CPU_")}
+    run = subprocess.run(
+        [sys.executable, "-c", PROBE],
+        env=env | {"NUMBA_CPU_NAME": "icelake-server"},
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
-
-
-def test_by_default_numba_compiles_for_the_host_as_it_chooses():
-    run = _import()
     assert run.returncode == 0, run.stderr
-    features, variable = run.stdout.split()
-    assert "prefer-256-bit" not in features and variable == "unset"
-
-
-@pytest.mark.skipif(not AVX512, reason="the host has no AVX-512: the variable changes nothing")
-def test_512_bits_reach_numba_before_the_package_makes_a_function():
-    run = _import(SOFT_SNAKE_GYM_VECTOR_BITS="512")
-    assert run.returncode == 0, run.stderr
-    features, variable = run.stdout.split()
-    assert features.endswith(",-prefer-256-bit") and "+avx512f" in features
-    assert variable == features  # and the children inherit it
-
-
-@pytest.mark.skipif(not AVX512, reason="the host has no AVX-512: the variable changes nothing")
-def test_the_users_own_numba_cpu_settings_win():
-    run = _import(SOFT_SNAKE_GYM_VECTOR_BITS="512", NUMBA_CPU_NAME="generic")
-    assert run.returncode == 0, run.stderr
-    assert "prefer-256-bit" not in run.stdout
-
-
-def test_a_width_other_than_256_or_512_is_refused_at_import():
-    run = _import(SOFT_SNAKE_GYM_VECTOR_BITS="1024")
-    assert run.returncode != 0
-    assert "SOFT_SNAKE_GYM_VECTOR_BITS = '1024': use 256 (the default) or 512" in run.stderr
-
-
-@pytest.mark.skipif(not AVX512, reason="the host has no AVX-512: the variable changes nothing")
-def test_a_benchmark_records_whether_it_measured_512_bit_vectors():
-    runs = [_import(BENCHMARK_PROBE), _import(BENCHMARK_PROBE, SOFT_SNAKE_GYM_VECTOR_BITS="512")]
-    assert all(run.returncode == 0 for run in runs), [run.stderr for run in runs]
-    default, wide = (json.loads(run.stdout) for run in runs)
-    assert default["vectors_512"] is False and wide["vectors_512"] is True
-    assert default["llvm_cpu"] == wide["llvm_cpu"] == binding.get_host_cpu_name()
+    regs = json.loads(run.stdout.splitlines()[-1])
+    # the same loop: 256-bit vectors as LLVM chooses, 512-bit ones when the kernel asks
+    assert regs["plain"]["zmm"] == 0 and regs["plain"]["ymm"] > 0
+    assert regs["wide"]["zmm"] > 0  # (and 256-bit ones for the remainder loops)
+    assert regs["energies"]["zmm"] > 0  # a lane kernel of the package

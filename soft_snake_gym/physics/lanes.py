@@ -14,8 +14,8 @@ end (:func:`stage_end`: the powers, and the curvatures for the observation), the
   entry (row, col) at ``(row * BAND + col) * LANES + r``), strides that are compile-time
   constants, so that LLVM can tell the stores of one lane's straight-line code apart;
 - a lane loop runs ``LANES`` = 16 iterations, the least that LLVM's loop vectorizer takes on
-  (four registers of four doubles: LLVM's tuning for Intel's cores prefers 256-bit vectors even
-  with AVX-512; two of eight with ``SOFT_SNAKE_GYM_VECTOR_BITS=512``, ``vector_width``);
+  (two registers of eight doubles with AVX-512: each kernel with lane loops asks for them,
+  :func:`_wide_vectors`, where LLVM's tuning for Intel's cores would take four of four);
 - a loop that does the same to every element of its arrays runs over the flat index, not over
   elements and lanes: LLVM unrolls a lane loop with a small body whole before its loop
   vectorizer runs, and the unrolled code stays scalar (numba runs no SLP vectorizer), where a
@@ -56,7 +56,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import intrinsic
 
 from soft_snake_gym.physics import banded, forces, geometry, layout, stepper
 from soft_snake_gym.physics.banded import KL, KU, PIVOT_THRESHOLD
@@ -120,6 +121,7 @@ drop_stale_cache(__file__, [m.__file__ for m in (banded, forces, geometry, layou
 
 LANES = 16
 """Robots per block: a compile-time constant, and LLVM's least trip count for a vector loop."""
+
 BAND = KL + KU + 1
 """Entries of a band row in a block: ``banded.WIDTH`` less the room for row exchanges' fill-in, which
 the block's factorization never makes (a lane that would exchange rows is solved elsewhere)."""
@@ -127,6 +129,7 @@ if KL != 5 or KU != KL:
     raise ImportError(
         "lanes.factor and lanes.solve write out the band's last five columns: update them for KL, KU"
     )
+
 
 # per-lane parameters, rows of the block's (N_LANE_PRM, LANES) array
 L_EA, L_EI, L_D, L_DB, L_CT, L_CN, L_CM, L_TOL, L_MAXIT, L_CHORD, L_MUD, L_G, L_EPS2 = range(13)
@@ -198,6 +201,27 @@ class Block(NamedTuple):
     stuck: np.ndarray
     minv: np.ndarray
     qprev: np.ndarray
+
+
+@intrinsic
+def _wide_vectors(typingctx):
+    """Ask LLVM for 512-bit vectors in the kernel that calls this (LLVM's ``prefer-vector-width``).
+
+    LLVM tunes for Intel's cores with AVX-512 as if they preferred 256-bit vectors, and numba
+    compiles every function of a process for one tuning. The lane kernels ask for the registers'
+    whole width for themselves; the scalar kernels (the single envs', a robot's own work in a
+    block) keep LLVM's choice, since 512-bit vectors made the single envs 0.92× to 0.94× as fast
+    on an Intel Xeon (docs/performance.md, "512-bit vectors"). On a CPU without AVX-512 the widest
+    vectors it has are used, as before. The numbers are the same bit for bit: no reassociation, so
+    a wider vector does more of the same operations at once.
+    """
+
+    def codegen(context, builder, signature, args):
+        # a string attribute, which llvmlite's list of known function attributes does not hold
+        set.add(builder.function.attributes, '"prefer-vector-width"="512"')
+        return context.get_dummy_value()
+
+    return types.none(), codegen
 
 
 @njit(cache=True, inline="always")
@@ -436,6 +460,7 @@ def residual(x, p, dt, jac, res):
     add, so none is -0). A lane whose velocity is not finite could differ; its residual is not
     finite either, and ``newton`` solves it by ``_be_newton``.
     """
+    _wide_vectors()
     if jac:
         _residual(x, p, dt, True, res)
     else:
@@ -567,6 +592,7 @@ def factor(J, kept, n):
     where ``_be_newton`` uses no factors (a swimmer's lane is solved on its robot, a worm's job
     gives up as ``_be_newton`` does).
     """
+    _wide_vectors()
     for r in range(LANES):
         kept[r] = True
     for k in range(n - KL):
@@ -612,6 +638,7 @@ def _backward_row(J, b, k):
     solve of 16 eels' bands takes 0.50 to 0.53 µs instead of 0.73 (docs/performance_history.md, "The
     back substitution's rows as functions of their own").
     """
+    _wide_vectors()
     _backward(J, b, k, KU)
 
 
@@ -623,6 +650,7 @@ def solve(J, b, n):
     loops are vector code; the back substitution's rows with ``KU`` entries through
     :func:`_backward_row`.
     """
+    _wide_vectors()
     for k in range(n - KL):
         _forward(J, b, k, KL)
     _forward(J, b, n - 5, 4)  # the last KL = 5 rows (the last has none below)
@@ -665,6 +693,7 @@ def take(s, uk, first, x, p):
     writes before anything reads them. Lanes past the last robot of ``s`` get the last robot
     again: their arithmetic stays that of a robot.
     """
+    _wide_vectors()
     n2 = s.q.shape[1]
     for r in range(LANES):
         i = min(first + r, s.q.shape[0] - 1)
@@ -753,6 +782,7 @@ def put(s, i, x, r, v):
 @njit(cache=True, error_model="numpy", _nrt=False)
 def take_history(s, first, x):
     """BDF2's history of robots ``first`` .. ``first + LANES - 1``, ``buf[B_QPREV]``, into ``x.qprev``."""
+    _wide_vectors()
     for r in range(LANES):
         i = min(first + r, s.q.shape[0] - 1)
         for k in range(s.q.shape[1]):
@@ -776,6 +806,7 @@ def stage_start(x, p, stage, dt):
     water's momentum at the start); stage 1 is ``_sdirk2_second_start``'s, from the edges of ``q``
     that :func:`newton`'s last residual left in ``E``.
     """
+    _wide_vectors()
     q, v, q0, v0, p0, A, E, vstep = x.q, x.v, x.q0, x.v0, x.p0, x.A, x.E, x.vstep
     n2 = q.size // LANES
     stage_dt = (stepper.GAMMA if stage == 0 else 1.0 - stepper.GAMMA) * dt
@@ -809,6 +840,7 @@ def bdf2_start(x, p, dt):
     both then hold this step's start. Every lane must have its history (``stepper.simulate``
     starts a fresh state with an SDIRK2 step).
     """
+    _wide_vectors()
     q, q0, v0, p0, A, E, vstep, qprev = x.q, x.q0, x.v0, x.p0, x.A, x.E, x.vstep, x.qprev
     n2 = q.size // LANES
     for k in range(q.size):
@@ -870,6 +902,7 @@ def stage_end(x, p, stage):
     Where no lane has stretch damping (the default) the stretching's terms are not made at all:
     their zeros would leave the sum +0, as ``damping_power``'s skip does.
     """
+    _wide_vectors()
     q, v, E, power = x.q, x.v, x.E, x.power
     n2 = q.size // LANES
     N = n2 // 2
@@ -934,6 +967,7 @@ def energies(x, p):
     their order of operations; the edges' lengths and turning from ``E`` (the same bits as from
     ``q``, see ``geometry.turning_at``).
     """
+    _wide_vectors()
     q, v, m, E, kbar, lbar, energy = x.q, x.v, x.m, x.E, x.kbar, x.lbar, x.energy
     n2 = q.size // LANES
     N = n2 // 2
@@ -985,6 +1019,7 @@ def _full_step(x, n2):
     every lane is updated in one flat loop (module docstring), then theirs is copied back from
     ``vacc``.
     """
+    _wide_vectors()
     v, R, J, vacc, dv, on, done = x.v, x.R, x.J, x.vacc, x.dv, x.on, x.done
     for k in range(n2 * LANES):
         vacc[k] = v[k]
@@ -1010,6 +1045,7 @@ def newton(s, first, go, x, p, dt, result):
     (status, iterations, residual, fluid power, friction power) into ``result`` (5, LANES) and
     its Newton counts into its robot's ``out``. Returns how many lanes the block solved.
     """
+    _wide_vectors()
     res, res1, kept, on, done = x.res, x.res1, x.kept, x.on, x.done
     n2 = s.q.shape[1]
     on[:] = False  # lanes on the common path
@@ -1102,6 +1138,7 @@ def ground_residual(x, p, dt, res):
     ``L_RMAX``, ``L_PFRIC``). The Jacobian is always made: the residual's bits do not depend on
     it, and :func:`crawl` then has the Jacobian of every iterate it accepts.
     """
+    _wide_vectors()
     v, m, F, R, A, J, stuck = x.v, x.m, x.F, x.R, x.A, x.J, x.stuck
     n2 = v.size // LANES
     cx, cv = -dt * dt, -dt
