@@ -218,7 +218,10 @@ def _wide_vectors(typingctx):
 
     def codegen(context, builder, signature, args):
         # a string attribute, which llvmlite's list of known function attributes does not hold
-        set.add(builder.function.attributes, '"prefer-vector-width"="512"')
+        try:
+            set.add(builder.function.attributes, '"prefer-vector-width"="512"')
+        except TypeError:  # an llvmlite whose attributes are no set: LLVM's own choice, as elsewhere
+            pass
         return context.get_dummy_value()
 
     return types.none(), codegen
