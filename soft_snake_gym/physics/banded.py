@@ -121,14 +121,15 @@ def band_solve(J: np.ndarray, piv: np.ndarray, n: int, b: np.ndarray) -> None:
             tmp = b[k]
             b[k] = b[p]
             b[p] = tmp
+        # every row, a 0 too (it changes no entry but the sign of a 0): a skip of 0 entries
+        # is a branch per lane in lanes.solve, which keeps that loop scalar on AMD's Zen 3
         bk = b[k]
-        if bk != 0.0:
-            if k + KL < n:  # constant-length loops where the band is whole (as in band_factor)
-                for d in range(1, KL + 1):
-                    b[k + d] -= J[k + d, KL - d] * bk
-            else:
-                for i in range(k + 1, n):
-                    b[i] -= J[i, k - i + KL] * bk
+        if k + KL < n:  # constant-length loops where the band is whole (as in band_factor)
+            for d in range(1, KL + 1):
+                b[k + d] -= J[k + d, KL - d] * bk
+        else:
+            for i in range(k + 1, n):
+                b[i] -= J[i, k - i + KL] * bk
     for k in range(n - 1, -1, -1):
         s = b[k]
         if reach <= k + KU and k + KU < n:

@@ -29,7 +29,11 @@ end (:func:`stage_end`: the powers, and the curvatures for the observation), the
   LLVM cannot prove non-negative, such as a row counted down, is tested (``if k < 0``) before
   the lane loop, or the loop stays scalar;
 - no branch per lane and no store that some lanes make and others skip (LLVM makes it a masked
-  store, slow on AMD's cores): each lane computes what every lane does and picks its values.
+  store, slow on AMD's cores, or on a core without AVX-512 may leave the loop scalar): each lane
+  computes what every lane does and picks its values. LLVM also masks the store of a value picked
+  between a new one and the one loaded from the same place (:func:`_larger`), and turns a mask of
+  0 or all ones that it sees made by a test back into the branch (the held rows of
+  :func:`ground_residual` take theirs from an array);
 
 **Bit for bit the scalar step.** The kernels do the scalar kernels' operations in the same
 order, so each lane's numbers are the ones :func:`stepper._be_residual`, ``band_factor`` and
@@ -166,7 +170,8 @@ class Block(NamedTuple):
     ``on`` and how each ended ``done``; the stage's actuator and damping power per lane
     ``power`` (2, LANES), the curvatures and their rates at the stage's end ``curv`` (2 (N-2)
     rows), and the energies at the step's end ``energy`` (3, LANES). On the ground
-    (:func:`crawl`) ``stuck`` is 1 for a node held at rest, else 0 (``ibuf[I_FRICTION]``). Under
+    (:func:`crawl`) ``slides`` is -1 (every bit set) for a sliding node, 0 for one held at rest
+    (``ibuf[I_FRICTION]``): a mask for its rows' bits (:func:`ground_residual`). Under
     BDF2, ``qprev`` is the last step's start (``buf[B_QPREV]``: :func:`take_history`).
     """
 
@@ -198,7 +203,7 @@ class Block(NamedTuple):
     power: np.ndarray
     curv: np.ndarray
     energy: np.ndarray
-    stuck: np.ndarray
+    slides: np.ndarray
     minv: np.ndarray
     qprev: np.ndarray
 
@@ -525,7 +530,8 @@ def _residual(x, p, dt, jac, res):
             e = R[_ix(i, r)] - p0[_ix(i, r)]
             R[_ix(i, r)] = e
             res[L_NORM2, r] += e * e
-            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) * (1.0 / m[_ix(i, r)]))  # as _be_residual's B_MINV
+            # 1 / m as _be_residual's B_MINV
+            res[L_RMAX, r] = _larger(res[L_RMAX, r], abs(e) * (1.0 / m[_ix(i, r)]))
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -534,6 +540,17 @@ def _add_masses(J, m, lanes):
     for i in range(m.size // LANES):
         for r in range(lanes):
             J[_jx(i, KL, r)] += m[_ix(i, r)]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _larger(cur, val):
+    """``max(cur, val)`` for a running maximum ``cur`` >= +0 (never -0 nor NaN), in a form whose store is every lane's.
+
+    ``max`` keeps ``cur`` where ``val`` is not larger, and LLVM then drops that lane's store of
+    the value it loaded: a masked store, which AMD's cores without AVX-512 (Zen 3) run slowly.
+    ``cur + 0.0`` is ``cur`` bit for bit, but not the loaded value to LLVM, so every lane stores.
+    """
+    return val if val > cur else cur + 0.0
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -552,7 +569,7 @@ def _norms(R, minv, res):
         for r in range(lanes):
             e = R[_ix(i, r)]
             res[L_NORM2, r] += e * e
-            res[L_RMAX, r] = max(res[L_RMAX, r], abs(e) * minv[_ix(i, r)])
+            res[L_RMAX, r] = _larger(res[L_RMAX, r], abs(e) * minv[_ix(i, r)])
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -614,9 +631,8 @@ def _forward(J, b, k, below):
         return
     for r in range(LANES):
         bk = b[_ix(k, r)]
-        if bk != 0.0:
-            for e in range(1, below + 1):
-                b[_ix(k + e, r)] -= J[_jx(k + e, KL - e, r)] * bk
+        for e in range(1, below + 1):
+            b[_ix(k + e, r)] -= J[_jx(k + e, KL - e, r)] * bk
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -678,7 +694,7 @@ def allocate(n2):
                  z(n), z(n2 * BAND * LANES), z(n), z(n), z(4 * (N - 1) * LANES), z((N_LANE_RES, LANES)),
                  z((N_LANE_RES, LANES)), z(LANES, dtype=np.bool_), z(LANES, dtype=np.bool_),
                  z(LANES, dtype=np.int64), z((N - 2) * LANES), z((N - 1) * LANES), z(n), z(n), z((2, LANES)), z(2 * (N - 2) * LANES),
-                 z((3, LANES)), z(N * LANES), z(n), z(n))  # fmt: skip
+                 z((3, LANES)), z(N * LANES, dtype=np.int64), z(n), z(n))  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -1136,13 +1152,14 @@ def ground_residual(x, p, dt, res):
     """``stepper._be_residual`` on the ground with its Jacobian, for every lane of a block.
 
     As :func:`residual` (the elastic forces in ``assemble``'s order), then isotropic kinetic
-    friction on the sliding nodes and ``v_i = 0`` on the stuck ones (``x.stuck``). Writes ``q``,
+    friction on the sliding nodes and ``v_i = 0`` on the stuck ones (``x.slides`` 0). Writes ``q``,
     ``F``, ``R``, ``A`` = ``v - v0`` and the band ``J``; per lane into ``res`` (``L_NORM2``,
     ``L_RMAX``, ``L_PFRIC``). The Jacobian is always made: the residual's bits do not depend on
     it, and :func:`crawl` then has the Jacobian of every iterate it accepts.
     """
     _wide_vectors()
-    v, m, F, R, A, J, stuck = x.v, x.m, x.F, x.R, x.A, x.J, x.stuck
+    v, m, F, R, A, J, slides = x.v, x.m, x.F, x.R, x.A, x.J, x.slides
+    bits = J.view(np.int64)
     n2 = v.size // LANES
     cx, cv = -dt * dt, -dt
     _start_residual(x, dt)
@@ -1156,12 +1173,13 @@ def ground_residual(x, p, dt, res):
     for i in range(n2 // 2):
         r0, r1 = 2 * i, 2 * i + 1
         for r in range(LANES):
-            held = stuck[_ix(i, r)] != 0.0
+            held = slides[_ix(i, r)] == 0
             vx, vy = v[_ix(r0, r)], v[_ix(r1, r)]
             fn = m[_ix(r0, r)] * p[L_G, r]
             fx, fy, d00, d01, d10, d11 = forces.isotropic_friction(vx, vy, p[L_MUD, r] * fn, p[L_EPS2, r])
-            R[_ix(r0, r)] = vx if held else R[_ix(r0, r)] - dt * fx
-            R[_ix(r1, r)] = vy if held else R[_ix(r1, r)] - dt * fy
+            rx, ry = R[_ix(r0, r)] - dt * fx, R[_ix(r1, r)] - dt * fy  # every lane loads and stores
+            R[_ix(r0, r)] = vx if held else rx
+            R[_ix(r1, r)] = vy if held else ry
             res[L_PFRIC, r] -= 0.0 if held else fx * vx + fy * vy
             # stores of every lane (a store kept where a lane is held would be a masked store,
             # slow on AMD's cores); a held diagonal gains +0, which leaves it as it is (it is no -0)
@@ -1170,11 +1188,15 @@ def ground_residual(x, p, dt, res):
             J[_jx(r1, KL - 1, r)] += -dt * d10
             J[_jx(r1, KL, r)] += 0.0 if held else -dt * d11
         for r in range(LANES):  # a held node's rows: their assembled diagonal alone
-            if stuck[_ix(i, r)] != 0.0:
-                for c in range(BAND):
-                    if c != KL:
-                        J[_jx(r0, c, r)] = 0.0
-                        J[_jx(r1, c, r)] = 0.0
+            # the entries' bits and'ed with the mask: 0 where held (+0), all ones where the node
+            # slides (as they are). Every lane stores, in vector code: a branch per lane left the
+            # loop scalar, and a mask LLVM can see is 0 or -1 (made here from a test) it turns
+            # back into that branch, so the mask is data (_await)
+            keep = slides[_ix(i, r)]
+            for c in range(BAND):
+                if c != KL:
+                    bits[_jx(r0, c, r)] &= keep
+                    bits[_jx(r1, c, r)] &= keep
     _norms(R, x.minv, res)
 
 
@@ -1375,7 +1397,7 @@ def _await(si, x, wi, r, phase, jac):
     if phase == _POINT:
         state = si.ibuf[I_FRICTION]
         for k in range(state.size // 2):
-            x.stuck[_ix(k, r)] = 1.0 if state[k] == STUCK else 0.0
+            x.slides[_ix(k, r)] = 0 if state[k] == STUCK else -1
     return _RESIDUAL
 
 
