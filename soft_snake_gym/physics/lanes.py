@@ -33,7 +33,7 @@ end (:func:`stage_end`: the powers, and the curvatures for the observation), the
   computes what every lane does and picks its values. LLVM also masks the store of a value picked
   between a new one and the one loaded from the same place (:func:`_larger`), and turns a mask of
   0 or all ones that it sees made by a test back into the branch (the held rows of
-  :func:`ground_residual` take theirs from an array);
+  :func:`ground_residual` take theirs from an array).
 
 **Bit for bit the scalar step.** The kernels do the scalar kernels' operations in the same
 order, so each lane's numbers are the ones :func:`stepper._be_residual`, ``band_factor`` and
