@@ -204,6 +204,8 @@ def test_ppo_timing_runs_from_the_command_line_with_subprocess_workers(tmp_path,
     # the batched env's three training-throughput figures: stepping >= + inference, both > 0
     b = ppo["batched"]
     assert b["step_steps_per_s"] > 0 and b["inference_steps_per_s"] > 0
+    # and our env's step alone, without VecNormalize's statistics over the observations
+    assert b["env_steps_per_s"] > b["step_steps_per_s"]
     # a timing run leaves no logs behind (SB3's default logger makes /tmp/SB3-<date> per learn())
     assert not list(tmp.glob("SB3-*"))
 
@@ -252,7 +254,13 @@ def test_each_target_is_given_round_by_round_beside_the_ratio_of_the_medians():
             row("Swimmer-v5 gym.make", [10_000, 12_000, 7_000], 0.04),
         ],
         "ppo": [
-            {"kind": "batched", "n_envs": 8, "steps_per_s": 400, "rounds": [400, 300, 500]},
+            {
+                "kind": "batched",
+                "n_envs": 8,
+                "steps_per_s": 400,
+                "rounds": [400, 300, 500],
+                "env_steps_per_s": 1600,
+            },
             {"kind": "subproc", "n_envs": 8, "steps_per_s": 200, "rounds": [100, 200, 250]},
         ],
         "nodes": [],
@@ -264,11 +272,14 @@ def test_each_target_is_given_round_by_round_beside_the_ratio_of_the_medians():
     assert r["worm256_vs_swimmer"] == pytest.approx(600 / 400)  # in simulated seconds
     assert r["worm256_vs_swimmer_rounds"] == pytest.approx([500 / 400, 600 / 480, 700 / 280])
     assert r["ppo_batched_vs_subproc_rounds"] == pytest.approx([4.0, 1.5, 2.0])
+    # 2.5 ms a batched step, 0.625 ms of it our env's: the subprocesses' 5 ms against the 1.875 left
+    assert r["ppo_env_free_bound"] == pytest.approx(5.0 / 1.875)
     res["machine"] = {"platform": "test", "cpus": 2, "numba_threads": 2, "threading_layer": "omp"}
     res["kernel_share"] = {}
     text = format_report({**res, "ratios": r})
     assert "rounds 1.25x to 2.50x)" in text  # every round under the worms' 10x line
     assert "rounds 1.50x to 4.00x, on both sides of the line)" in text  # PPO's 2x: a noisy verdict
+    assert "(with our env's step free: 2.67x;" in text
     assert "rounds 3.00x to 3.00x)" in text  # the single worm's rounds all on its 3x line: met
     assert "against the machine's peak" not in text  # results from before the peak was measured
     # the work of our plain rows (not the Swimmer's) against the peak on each row's threads
