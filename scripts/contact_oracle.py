@@ -59,19 +59,13 @@ def _newton(f, ibuf):
 
 def _guess(s: L.SimArrays, guess: int, state_end: np.ndarray, v_end: np.ndarray) -> None:
     """Overwrite ``_be_start``'s guess in ``s`` with guess number ``guess`` of :data:`GUESSES`."""
-    v, state, vslide = (
-        s.v.reshape(-1, 2),
-        s.ibuf[L.I_FRICTION][: s.v.size // 2],
-        s.buf[L.B_VSLIDE].reshape(-1, 2),
-    )
+    v, state = s.v.reshape(-1, 2), s.ibuf[L.I_FRICTION][: s.v.size // 2]
     v_end = v_end.reshape(-1, 2)
     if guess == 1:
-        stick = (state_end == L.STUCK) & (state == L.SLIDING)
-        release = (state_end == L.SLIDING) & (state == L.STUCK)
-        v[stick] = 0.0
-        # as stepper._release: just above the sticking speed, along the way the node ends
-        push = v_end[release] / np.linalg.norm(v_end[release], axis=1)[:, None]
-        v[release] = vslide[release] = 2.0 * s.prm[L.P_VTOL] * push
+        v[(state_end == L.STUCK) & (state == L.SLIDING)] = 0.0
+        for i in np.flatnonzero((state_end == L.SLIDING) & (state == L.STUCK)):
+            # released as _update_contacts releases, pushed the way the node ends
+            stepper._release(s.v, s.buf[L.B_VSLIDE], state, i, v_end[i, 0], v_end[i, 1], s.prm[L.P_VTOL])
         state[:] = state_end
     elif guess == 2:  # the contacts as _be_start guessed them
         v[state == L.SLIDING] = v_end[state == L.SLIDING]
