@@ -40,18 +40,18 @@ GUESSES = ("as stepped", "final contacts", "final velocities", "kinematic veloci
 
 @njit(cache=True)
 def _start(f, ibuf, uk, ul):
-    """A sub-step's start as ``stepper.simulate`` makes it: the rest shape moved, ``_be_start``'s guess."""
+    """A sub-step's start as ``stepper.simulate`` makes it: the rest shape moved, ``_be_start``'s guess; returns its ``dt``."""
     s = L.sim_views(f, ibuf)
     dt = s.prm[L.P_H] / int(s.prm[L.P_SUBSTEPS])
     stepper.move_rest_shape(s, uk, ul, dt)
     stepper._be_start(s, L.MEDIUM_GROUND, 1.0)
+    return dt
 
 
 @njit(cache=True)
-def _newton(f, ibuf):
-    """Newton's loop from the guess in the arrays: (status, factorizations, residuals)."""
+def _newton(f, ibuf, dt):
+    """Newton's loop of a sub-step of ``dt`` from the guess in the arrays: (status, factorizations, residuals)."""
     s = L.sim_views(f, ibuf)
-    dt = s.prm[L.P_H] / int(s.prm[L.P_SUBSTEPS])
     s.out[L.O_NFACTOR] = s.out[L.O_NJAC] = s.out[L.O_NRES] = 0.0
     status = stepper._be_newton(s, dt, L.MEDIUM_GROUND)[0]
     return status, s.out[L.O_NFACTOR], s.out[L.O_NJAC] + s.out[L.O_NRES]
@@ -103,10 +103,10 @@ def main() -> None:
         state_end, v_end = arrays.ibuf[L.I_FRICTION][: arrays.v.size // 2].copy(), arrays.v.copy()
         for g in range(len(GUESSES)):
             f, ibuf = f0.copy(), ibuf0.copy()
-            _start(f, ibuf, task.uk.copy(), task.ul.copy())
+            dt = _start(f, ibuf, task.uk.copy(), task.ul.copy())
             s = L.sim_arrays_over(f, ibuf)
             _guess(s, g, state_end, v_end)
-            status, factorizations, residuals = _newton(f, ibuf)
+            status, factorizations, residuals = _newton(f, ibuf, dt)
             counts[g] += factorizations, residuals, status != stepper.OK
             moved[g].append(np.abs(s.v - v_end).max())
         if terminated or truncated:
